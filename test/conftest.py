@@ -1,0 +1,242 @@
+"""Shared test harness for bldc_actuator.
+
+Fixtures
+    shared_data_dir        Path to the real recordings (``../shared/data`` beside the repo, or
+                           ``$BLDC_SHARED_DIR/data``); skips the test when absent.
+    ros_context            a fresh ``rclpy.context.Context`` initialised on its own ROS domain id;
+                           skips when rclpy is not importable.
+    ros_executor           a SingleThreadedExecutor on ``ros_context`` spinning in a daemon thread; add your
+                           nodes to it (``ros_executor.add_node(node)``); they are destroyed at teardown.
+    colcon_install_prefix  session-wide ``colcon build`` of this package (see ``colcon_install``).
+
+Plain helpers (``from conftest import wait_for, colcon_install, colcon_env``)
+    wait_for(predicate, timeout)   poll instead of sleeping a fixed time.
+    colcon_install(workdir)        colcon-build a copy of the package under ``workdir``, return the install prefix.
+    colcon_env(prefix)             environment that runs the colcon-installed scripts against that prefix.
+
+Markers (applied automatically where a fixture implies them): ``ros`` (uses rclpy),
+``shared_data`` (needs ../shared/data), ``slow`` (seconds or more; deselect with ``-m "not slow"``).
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+import shutil
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+# No DDS discovery traffic off this host, whatever the caller's environment says. Must precede rclpy.init().
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+os.environ.setdefault("MPLBACKEND", "Agg")
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = "bldc_actuator"
+
+# ROS domain ids used by tests: DOMAIN_ID_BASE..DOMAIN_ID_MAX (101 is the last id whose DDS ports stay
+# below the Linux ephemeral range). Under pytest-xdist each worker gets its own slice.
+DOMAIN_ID_BASE = 40
+DOMAIN_ID_MAX = 101
+_domain_counter = itertools.count()
+
+
+# --------------------------------------------------------------------------------------------- markers
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line("markers", "ros: uses rclpy (a ROS context, nodes, topics)")
+    config.addinivalue_line("markers", "slow: takes seconds or more; deselect with -m 'not slow'")
+    config.addinivalue_line("markers", "shared_data: needs the real recordings in ../shared/data")
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    implied = {
+        "ros_context": "ros",
+        "ros_executor": "ros",
+        "shared_data_dir": "shared_data",
+        "colcon_install_prefix": "slow",
+    }
+    for item in items:
+        for fixture_name, marker in implied.items():
+            if fixture_name in getattr(item, "fixturenames", ()):
+                item.add_marker(marker)
+
+
+def pytest_report_header(config: pytest.Config) -> list[str]:
+    import importlib.util
+
+    shared = find_shared_data_dir()
+    return [
+        f"bldc_actuator: repo={REPO_ROOT} ROS_AUTOMATIC_DISCOVERY_RANGE="
+        f"{os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE']} "
+        f"rclpy={'yes' if importlib.util.find_spec('rclpy') else 'no'} "
+        f"shared_data={shared if shared else 'absent'}"
+    ]
+
+
+# ------------------------------------------------------------------------------------------ shared data
+
+
+def find_shared_data_dir() -> Path | None:
+    """The real-recordings folder: ``$BLDC_SHARED_DIR/data`` if that variable is set (it names the
+    ``shared/`` folder), else ``<repo>/../shared/data``; ``None`` when it does not exist."""
+    env = os.environ.get("BLDC_SHARED_DIR")
+    shared = Path(env).expanduser() if env else REPO_ROOT.parent / "shared"
+    data = shared / "data"
+    return data.resolve() if data.is_dir() else None
+
+
+@pytest.fixture(scope="session")
+def shared_data_dir() -> Path:
+    data = find_shared_data_dir()
+    if data is None:
+        where = os.environ.get("BLDC_SHARED_DIR") or str(REPO_ROOT.parent / "shared")
+        pytest.skip(f"shared recordings not found: no data/ folder in {where} (set BLDC_SHARED_DIR)")
+    return data
+
+
+# ------------------------------------------------------------------------------------------------- ROS
+
+
+def next_domain_id() -> int:
+    """A ROS domain id not used by any other test of this run (ids cycle only after a whole slice)."""
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "gw0")
+    index = int(worker[2:]) if worker.startswith("gw") and worker[2:].isdigit() else 0
+    workers = max(1, int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")))
+    ids = DOMAIN_ID_MAX - DOMAIN_ID_BASE + 1
+    span = max(1, ids // workers)
+    return DOMAIN_ID_BASE + (index * span + next(_domain_counter) % span) % ids
+
+
+@pytest.fixture
+def ros_context():
+    """An rclpy Context of its own on a unique domain id; shut down after the test."""
+    rclpy = pytest.importorskip("rclpy", reason="rclpy not importable (pip install .[wheels] or source ROS)")
+    from rclpy.context import Context
+    from rclpy.signals import SignalHandlerOptions
+
+    context = Context()
+    rclpy.init(context=context, domain_id=next_domain_id(), signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        yield context
+    finally:
+        rclpy.try_shutdown(context=context)
+
+
+@pytest.fixture
+def ros_executor(ros_context):
+    """A SingleThreadedExecutor on ``ros_context`` spinning in a daemon thread.
+
+    Create nodes with ``context=ros_context`` and ``ros_executor.add_node(node)``; at teardown the executor
+    stops and every node still added to it is destroyed.
+    """
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+
+    executor = SingleThreadedExecutor(context=ros_context)
+
+    def spin() -> None:
+        try:
+            executor.spin()
+        except ExternalShutdownException:
+            pass
+
+    thread = threading.Thread(target=spin, name="ros_executor", daemon=True)
+    thread.start()
+    try:
+        yield executor
+    finally:
+        executor.shutdown(timeout_sec=5.0)
+        thread.join(timeout=5.0)
+        for node in executor.get_nodes():
+            node.destroy_node()
+
+
+def wait_for(predicate: Callable[[], object], timeout: float = 5.0, interval: float = 0.01):
+    """Poll ``predicate`` until it returns something truthy (returned) or ``timeout`` seconds pass
+    (returns the last falsy value, so ``assert wait_for(...)`` reads naturally)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = predicate()
+        if value or time.monotonic() >= deadline:
+            return value
+        time.sleep(interval)
+
+
+# ----------------------------------------------------------------------------------------------- colcon
+
+# top-level entries of the checkout that are not part of the package source
+_NOT_SOURCE = {".git", ".venv", "build", "install", "log", "out", ".pytest_cache", ".ci"}
+
+
+def colcon_executable() -> str | None:
+    """``colcon`` next to the running interpreter (the project venv), else on PATH."""
+    beside = Path(sys.executable).parent / "colcon"
+    return str(beside) if beside.exists() else shutil.which("colcon")
+
+
+def colcon_install(workdir: Path, source: Path = REPO_ROOT, timeout: float = 600.0) -> Path:
+    """``colcon build`` a copy of the package in ``workdir`` and return the package's install prefix
+    (``workdir/install/bldc_actuator``: ``lib/bldc_actuator/<executables>``, ``share/bldc_actuator/...``,
+    ``lib/pythonX.Y/site-packages/bldc_actuator``). Skips the calling test when colcon is missing.
+
+    The build runs with the current interpreter's colcon (no ``--symlink-install``: it breaks with
+    setuptools >= 80), logs and COLCON_HOME inside ``workdir``, so nothing is written to the checkout.
+    """
+    colcon = colcon_executable()
+    if colcon is None:
+        pytest.skip("colcon not installed (pip install colcon-common-extensions, or .[test])")
+    workdir = Path(workdir)
+    src = workdir / "src" / PACKAGE
+    src.mkdir(parents=True, exist_ok=True)
+    for entry in source.iterdir():
+        if entry.name in _NOT_SOURCE or entry.name.endswith(".egg-info"):
+            continue
+        if entry.is_dir():
+            shutil.copytree(
+                entry, src / entry.name, dirs_exist_ok=True,
+                ignore=shutil.ignore_patterns("__pycache__", "*.pyc"),
+            )
+        else:
+            shutil.copy2(entry, src / entry.name)
+    env = dict(os.environ, COLCON_HOME=str(workdir / "colcon_home"))
+    cmd = [
+        colcon, "--log-base", str(workdir / "log"),
+        "build", "--base-paths", str(src),
+        "--build-base", str(workdir / "build"), "--install-base", str(workdir / "install"),
+        "--event-handlers", "console_cohesion+", "desktop_notification-", "status-", "terminal_title-",
+    ]  # fmt: skip
+    result = subprocess.run(cmd, cwd=workdir, env=env, capture_output=True, text=True, timeout=timeout)
+    if result.returncode != 0:
+        pytest.fail(
+            f"colcon build failed (exit {result.returncode}): {' '.join(cmd)}\n"
+            f"--- stdout ---\n{result.stdout[-6000:]}\n--- stderr ---\n{result.stderr[-4000:]}",
+            pytrace=False,
+        )
+    return workdir / "install" / PACKAGE
+
+
+def colcon_env(prefix: Path, base: dict[str, str] | None = None) -> dict[str, str]:
+    """Environment in which the scripts of a colcon install under ``prefix`` import *that* install
+    (what ``source install/setup.bash`` would add): its site-packages first on PYTHONPATH, the prefix on
+    AMENT_PREFIX_PATH. The editable install in the venv sits behind PYTHONPATH, so it does not interfere.
+    """
+    prefix = Path(prefix)
+    env = dict(os.environ if base is None else base)
+    site = sorted(prefix.glob("lib/python3*/site-packages")) + sorted(prefix.glob("local/lib/python3*/dist-packages"))
+    paths = [str(p) for p in site] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p]
+    env["PYTHONPATH"] = os.pathsep.join(paths)
+    env["AMENT_PREFIX_PATH"] = os.pathsep.join([str(prefix)] + [p for p in env.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p])
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    return env
+
+
+@pytest.fixture(scope="session")
+def colcon_install_prefix(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """One colcon build of this package per test session (per xdist worker); returns the install prefix."""
+    return colcon_install(tmp_path_factory.mktemp("colcon_ws"))
