@@ -1,0 +1,106 @@
+"""Optional physics terms: ONE implementation of each equation, shared by the simulator and diagnosis.
+
+Every function accepts Python floats or numpy arrays (broadcasting) and is pure. Torques are at the
+motor side unless the name says ``_out``. Friction and cogging are written as a *basis* (regressor
+columns) times coefficients, so the model evaluates ``basis @ coefficients`` and the diagnosis fits
+the same columns by least squares.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def _is_array(*xs) -> bool:
+    return any(isinstance(x, np.ndarray) for x in xs)
+
+
+# -- friction -------------------------------------------------------------------------------------
+
+def friction_magnitude(direction, speed, coulomb, asymmetry, stribeck, stribeck_velocity):
+    """Kinetic friction magnitude ``F(ω) = max(0, τ_c + d·τ_asym + τ_s·exp(-(ω/ω_s)²))`` [N·m].
+
+    ``direction`` d = sign(ω) (±1; at rest the direction the rotor is pushed), ``speed`` = |ω| [rad/s].
+    At ``speed = 0`` this is the breakaway (static) friction.
+    """
+    if _is_array(direction, speed, coulomb, asymmetry, stribeck, stribeck_velocity):
+        value = coulomb + direction * asymmetry + stribeck * np.exp(-(speed / stribeck_velocity) ** 2)
+        return np.maximum(value, 0.0)
+    value = coulomb + direction * asymmetry + stribeck * math.exp(-(speed / stribeck_velocity) ** 2)
+    return value if value > 0.0 else 0.0
+
+
+def friction_basis(omega, stribeck_velocity, smoothing_velocity=0.0):
+    """Regressor columns of the friction torque for fitting: ``τ_f = basis @ [τ_c, τ_asym, τ_s]``.
+
+    Columns: ``s``, ``|s|`` (= 1 where moving; the asymmetry multiplies sign·direction = 1), and
+    ``s·exp(-(ω/ω_s)²)`` with ``s = sign(ω)`` (or ``tanh(ω/ω_ε)`` when ``smoothing_velocity`` > 0, which
+    a fit on noisy velocity needs). The model's :func:`friction_magnitude` times ``sign(ω)`` equals
+    ``basis @ coefficients`` wherever the magnitude is positive.
+    """
+    omega = np.asarray(omega, dtype=float)
+    s = np.tanh(omega / smoothing_velocity) if smoothing_velocity > 0 else np.sign(omega)
+    return np.column_stack([s, np.abs(s), s * np.exp(-(omega / stribeck_velocity) ** 2)])
+
+
+def viscous_basis(omega):
+    """Columns ``ω`` and ``ω·|ω|`` (viscous and aerodynamic/iron drag)."""
+    omega = np.asarray(omega, dtype=float)
+    return np.column_stack([omega, omega * np.abs(omega)])
+
+
+# -- angle-periodic torques -----------------------------------------------------------------------
+
+def cogging_torque(theta, order, cos_coeffs, sin_coeffs):
+    """``τ_cog(θ) = Σ_k a_k cos(k N_c θ) + b_k sin(k N_c θ)`` [N·m], θ the rotor mechanical angle [rad].
+
+    ``cos_coeffs``/``sin_coeffs`` are sequences (harmonic k = 1..n); for a batch, each entry may be an
+    array over actuators. ``order`` = N_c (0 disables).
+    """
+    if not len(cos_coeffs):
+        return 0.0 * theta
+    if _is_array(theta, order, *cos_coeffs, *sin_coeffs):
+        base = np.asarray(order) * theta
+        total = 0.0
+        for k, (a, b) in enumerate(zip(cos_coeffs, sin_coeffs), start=1):
+            total = total + a * np.cos(k * base) + b * np.sin(k * base)
+        return total
+    base = order * theta
+    total = 0.0
+    for k, (a, b) in enumerate(zip(cos_coeffs, sin_coeffs), start=1):
+        total += a * math.cos(k * base) + b * math.sin(k * base)
+    return total
+
+
+def angle_harmonic_basis(theta, order, n_harmonics=1):
+    """Columns ``cos(k N θ), sin(k N θ)`` for k = 1..n: the basis of :func:`cogging_torque` (and of
+    electrical-angle ripple with ``N = pole_pairs``)."""
+    theta = np.asarray(theta, dtype=float)
+    cols = []
+    for k in range(1, n_harmonics + 1):
+        cols += [np.cos(k * order * theta), np.sin(k * order * theta)]
+    return np.column_stack(cols)
+
+
+def position_load_torque_out(theta_out, constant, gravity, gravity_phase, stiffness, spring_zero):
+    """External load at the output ``τ_0 + τ_g sin(θ_out + φ_g) + k (θ_out - θ_k)`` [N·m]."""
+    sin = np.sin if _is_array(theta_out, gravity_phase) else math.sin
+    return constant + gravity * sin(theta_out + gravity_phase) + stiffness * (theta_out - spring_zero)
+
+
+# -- temperature dependence -----------------------------------------------------------------------
+
+def resistance_at(r_ref, temperature, reference_temperature, alpha, enabled=True):
+    """Copper resistance ``R(T) = R_ref (1 + α (T - T_ref))`` [Ω]; α = 0.00393 /K for copper."""
+    if not enabled:
+        return r_ref + 0.0 * temperature
+    return r_ref * (1.0 + alpha * (temperature - reference_temperature))
+
+
+def flux_factor(temperature, reference_temperature, beta, enabled=True):
+    """Magnet flux (K_t_q = K_b_q) relative to its reference value: ``1 + β (T - T_ref)``, β < 0."""
+    if not enabled:
+        return 1.0 + 0.0 * temperature
+    return 1.0 + beta * (temperature - reference_temperature)

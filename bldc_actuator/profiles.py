@@ -1,0 +1,151 @@
+"""Command profiles: step, chirp, sine, or a CSV of commands; and running one through an actuator.
+
+A profile is a zero-order-hold sequence: command ``values[k]`` applies from ``t[k]`` to ``t[k+1]``.
+Commands are q-axis current [A] (``kind="current"``) or output torque [N·m] (``kind="torque"``);
+an optional external load torque at the output [N·m] rides along.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+KINDS = ("current", "torque")
+
+
+@dataclass
+class Profile:
+    t: np.ndarray                       #: sample times [s], strictly increasing, t[0] = 0 usually
+    values: np.ndarray                  #: command at each sample (held until the next)
+    kind: str = "current"               #: "current" [A, q-axis] or "torque" [N·m, output]
+    load_torque: np.ndarray | None = None  #: external load at the output [N·m]
+    name: str = "profile"
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.t = np.asarray(self.t, dtype=float)
+        self.values = np.asarray(self.values, dtype=float)
+        if self.kind not in KINDS:
+            raise ValueError(f"profile kind: expected one of {KINDS}, got {self.kind!r}")
+        if self.t.ndim != 1 or self.t.shape != self.values.shape or len(self.t) < 2:
+            raise ValueError("profile: t and values must be 1-D arrays of the same length >= 2")
+        if not np.all(np.diff(self.t) > 0):
+            k = int(np.argmin(np.diff(self.t) > 0)) + 1
+            raise ValueError(f"profile time: must be strictly increasing; sample {k} (t={self.t[k]!r} s) is not")
+        if not np.all(np.isfinite(self.values)):
+            k = int(np.argmin(np.isfinite(self.values)))
+            raise ValueError(f"profile values: sample {k} is not finite ({self.values[k]!r})")
+        if self.load_torque is not None:
+            self.load_torque = np.asarray(self.load_torque, dtype=float)
+            if self.load_torque.shape != self.t.shape:
+                raise ValueError("profile load_torque: must have the same length as t")
+
+    @property
+    def duration(self) -> float:
+        return float(self.t[-1] - self.t[0])
+
+
+def _time(duration: float, rate: float) -> np.ndarray:
+    if not (duration > 0 and math.isfinite(duration)):
+        raise ValueError(f"duration: expected > 0 s, got {duration!r}")
+    if not (rate > 0 and math.isfinite(rate)):
+        raise ValueError(f"rate: expected > 0 Hz, got {rate!r}")
+    n = int(round(duration * rate))
+    return np.arange(n + 1) / rate
+
+
+def step(amplitude: float, duration: float = 0.5, t_step: float = 0.05, rate: float = 1000.0,
+         kind: str = "current", initial: float = 0.0) -> Profile:
+    """Step from ``initial`` to ``amplitude`` at ``t_step``."""
+    t = _time(duration, rate)
+    return Profile(t, np.where(t >= t_step, amplitude, initial), kind, name=f"step {amplitude:g}")
+
+
+def sine(amplitude: float, frequency: float, duration: float = 1.0, rate: float = 1000.0,
+         kind: str = "current", offset: float = 0.0) -> Profile:
+    t = _time(duration, rate)
+    return Profile(t, offset + amplitude * np.sin(2 * np.pi * frequency * t), kind,
+                   name=f"sine {amplitude:g} @ {frequency:g} Hz")
+
+
+def chirp(amplitude: float, f0: float, f1: float, duration: float = 2.0, rate: float = 1000.0,
+          kind: str = "current", method: str = "logarithmic") -> Profile:
+    """Swept sine from ``f0`` to ``f1`` Hz (scipy.signal.chirp)."""
+    from scipy.signal import chirp as _chirp
+
+    t = _time(duration, rate)
+    return Profile(t, amplitude * _chirp(t, f0, duration, f1, method=method, phi=-90), kind,
+                   name=f"chirp {f0:g}-{f1:g} Hz")
+
+
+def from_csv(path: str | Path) -> Profile:
+    """CSV with a header: ``time`` [s] and ``current_command`` [A] or ``torque_command`` [N·m],
+    optional ``load_torque`` [N·m]. Errors name the line."""
+    path = Path(path)
+    with path.open(newline="") as fh:
+        reader = csv.reader(fh)
+        try:
+            header = [h.strip() for h in next(reader)]
+        except StopIteration:
+            raise ValueError(f"{path}: empty file, expected a header line") from None
+        if "time" not in header:
+            raise ValueError(f"{path}:1: header needs a 'time' column [s], got {header}")
+        kind = "current" if "current_command" in header else "torque" if "torque_command" in header else None
+        if kind is None:
+            raise ValueError(f"{path}:1: header needs 'current_command' [A] or 'torque_command' [N*m]")
+        cols = {"time": header.index("time"), "cmd": header.index(f"{kind}_command")}
+        if "load_torque" in header:
+            cols["load"] = header.index("load_torque")
+        rows = []
+        for lineno, row in enumerate(reader, start=2):
+            if not row or all(not x.strip() for x in row):
+                continue
+            try:
+                rows.append([float(row[cols[k]]) for k in cols])
+            except (ValueError, IndexError):
+                raise ValueError(f"{path}:{lineno}: expected numbers in columns "
+                                 f"{', '.join(header[i] for i in cols.values())}, got {row!r}") from None
+    if len(rows) < 2:
+        raise ValueError(f"{path}: need at least two command rows")
+    data = np.array(rows)
+    try:
+        return Profile(data[:, 0], data[:, 1], kind, data[:, 2] if "load" in cols else None, name=path.name)
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None
+
+
+#: signals recorded by :func:`run_profile` (all of :func:`Actuator.outputs` that are numbers)
+def run_profile(actuator, profile: Profile, *, record_every: float | None = None):
+    """Drive ``actuator`` with ``profile``; record outputs at every profile sample (or every
+    ``record_every`` seconds). Returns a :class:`SimResult`."""
+    from .model import SimResult
+
+    setter = actuator.set_current_command if profile.kind == "current" else actuator.set_torque_command
+    t_ns = np.round(profile.t * 1e9).astype(np.int64)
+    start = actuator.t_ns
+    if record_every:
+        rec_ns = np.arange(t_ns[0], t_ns[-1] + 1, int(round(record_every * 1e9)), dtype=np.int64)
+    else:
+        rec_ns = t_ns
+    events = np.union1d(t_ns, rec_ns)
+    cmd_idx = np.searchsorted(t_ns, events, side="right") - 1
+    is_rec = np.isin(events, rec_ns)
+    rows: list[dict] = []
+    load = profile.load_torque
+    for k, (ev, ci, rec) in enumerate(zip(events, cmd_idx, is_rec)):
+        target = start + int(ev - t_ns[0])
+        if target > actuator.t_ns:
+            actuator.step_ns(target - actuator.t_ns)
+        if rec:
+            rows.append(actuator.outputs())
+        setter(float(profile.values[ci]))
+        if load is not None:
+            actuator.set_load_torque(float(load[ci]))
+    keys = [k for k, v in rows[0].items() if isinstance(v, (int, float, bool, np.bool_))]
+    signals = {k: np.array([r[k] for r in rows], dtype=float) for k in keys}
+    signals["command"] = profile.values[np.searchsorted(t_ns, rec_ns, side="right") - 1]
+    return SimResult(signals, actuator.params)
