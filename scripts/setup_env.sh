@@ -18,7 +18,7 @@
 # pip venv unless AMENT_PREFIX_PATH is set).
 set -euo pipefail
 
-REPO="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+REPO="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd -P)"
 VENV="${BLDC_VENV:-$REPO/.venv}"
 PY="${PYTHON:-python3}"
 STAMP="$VENV/.bldc_setup_stamp"
@@ -39,13 +39,24 @@ fresh() {
         [[ "$STAMP" -nt "$REPO/$f" ]] || return 1
     done
     # the venv still works and the editable install still points at this checkout
-    [[ "$("$VENV/bin/python" -c 'import bldc_actuator, os; print(os.path.dirname(bldc_actuator.__file__))' 2>/dev/null)" \
+    [[ "$("$VENV/bin/python" -c 'import bldc_actuator, os; print(os.path.dirname(os.path.realpath(bldc_actuator.__file__)))' 2>/dev/null)" \
         == "$REPO/bldc_actuator" ]]
 }
 
 if fresh; then
     echo "$VENV"
     exit 0
+fi
+
+# One setup at a time per checkout (e.g. demo.sh and test.sh started together): lock this script file,
+# then look again, since the other run may just have finished.
+if command -v flock >/dev/null 2>&1; then
+    exec 9<"${BASH_SOURCE[0]}"
+    flock 9
+    if fresh; then
+        echo "$VENV"
+        exit 0
+    fi
 fi
 
 run() {  # run quietly, show the log on failure
