@@ -151,6 +151,7 @@ class _Coeffs:
         self.load_phi = ld("gravity_phase")
         self.load_k = ld("spring_stiffness")
         self.load_k0 = ld("spring_zero")
+        self.has_position_load = bool(np.any(self.load_g) or np.any(self.load_k))
         self._thermal_cache: dict[int, tuple] = {}
 
     def thermal(self, h_ns: int):
@@ -228,6 +229,9 @@ class EnergyLedger:
     load: float = 0.0               #: work done on the external load and cogging ∫ (τ_load/N + τ_cog) ω dt
     heat_to_ambient: float = 0.0    #: ∫ (T_h - T_a)/R_ha dt
     thermal: float = 0.0            #: C_w (T_w - T_w0) + C_h (T_h - T_h0)
+    #: ∫ K ω(t) i_q dt (electrical side) minus the work of the interval-mean torque (mechanical side):
+    #: the integrator's own energy error, O(h³) per interval. Reported, never subtracted in residual().
+    discretization: float = 0.0
 
     def residual(self, initial: "EnergyLedger") -> float:
         """Electrical energy in minus everything it went to [J] (0 up to round-off)."""
@@ -242,8 +246,8 @@ class EnergyLedger:
 class _S:
     """Mutable kernel state (floats for one actuator, arrays for a batch)."""
 
-    __slots__ = ("t_ns", "i", "omega", "theta", "T_w", "T_h", "v", "z", "i_ref", "tripped", "cmd_q",
-                 "tau_ext_out", "e_in", "e_joule", "e_visc", "e_fric", "e_load", "e_amb", "h_left")
+    __slots__ = ("t_ns", "i", "omega", "theta", "T_w", "T_h", "v", "z", "i_ref", "tripped", "cmd_q", "v_cmd",
+                 "tau_ext_out", "acc", "e_disc", "e_in", "e_joule", "e_visc", "e_fric", "e_load", "e_amb", "h_left")
 
 
 # -- the kernel ----------------------------------------------------------------------------------------
@@ -256,7 +260,13 @@ def _current_limit(c: _Coeffs, s: _S, ops):
 
 
 def _control_tick(c: _Coeffs, s: _S, ops) -> None:
-    """One execution of the discrete d/q PI current controller; sets the voltage held until the next."""
+    """One execution of the discrete d/q PI current controller; sets the voltage held until the next.
+    In voltage mode (``s.v_cmd`` not None) the PI is bypassed and the commanded voltage is applied."""
+    if s.v_cmd is not None:
+        mag = abs(s.v_cmd)
+        s.v = s.v_cmd * ops.where(mag > c.V_max, c.V_max / ops.where(mag > 0.0, mag, 1.0), 1.0)
+        s.i_ref = 0.0 * s.omega
+        return
     lim = _current_limit(c, s, ops)
     s.i_ref = ops.clip(s.cmd_q, -lim, lim)
     err = 1j * s.i_ref - s.i                                   # i_d_ref = 0
@@ -275,49 +285,56 @@ def _advance(c: _Coeffs, s: _S, h_ns: int, ops) -> None:
     R = effects.resistance_at(c.R_ref, s.T_w, c.T_ref, c.alpha)
     K = c.K_ref * effects.flux_factor(s.T_h, c.T_ref, c.beta)   # magnet at housing temperature
     L, J = c.L, c.J
-    # electrical: L di/dt = v - (R + j p w0 L) i - j K w, exact for constant w
-    Z = R + 1j * c.pole_pairs * w0 * L
+    # electrical: L di/dt = v - (R + j p w0 L) i - j K ω(t), with the speed ramping linearly over the
+    # interval, ω(t) = w0 + r t, r = 2 (w - w0)/h (w = mean speed, found below). Exact solution:
+    # i(t) = c0 + c1 t + (i0 - c0) e^{-a t}, c1 = -j K r/(L a), c0 = (v - j K w0)/(L a) - c1/a.
+    # cross-coupling (does no work) at the predicted mid-interval speed, extrapolating the last acceleration
+    Z = R + 1j * c.pole_pairs * (w0 + 0.5 * h * s.acc) * L
     a = Z / L
     ah = a * h
     E = ops.cexp(-ah)
-    phi1 = (1.0 - E) / ah
-    iv = v / Z                                  # steady state from the voltage
-    iw = -1j * K / Z                            # steady state per unit back-EMF speed
-    A = (iv * (1.0 - phi1) + i0 * phi1).imag    # mean i_q = A + B w
-    B = (iw * (1.0 - phi1)).imag
+    phi1 = (1.0 - E) / ah                        # (1/h) ∫ e^{-at} dt
+    # mean current ī = c0 (1 - phi1) + c1 h/2 + i0 phi1, affine in w: split c0, c1 into parts
+    c1_w = -2j * K / (h * Z)                     # c1 = c1_w (w - w0)
+    c0_v = (v - 1j * K * w0) / Z
+    c0_w = -c1_w / a                             # c0 = c0_v + c0_w (w - w0)
+    m_w = c0_w * (1.0 - phi1) + c1_w * (0.5 * h)
+    A = (c0_v * (1.0 - phi1) + i0 * phi1 - m_w * w0).imag   # mean i_q = A + B w
+    B = m_w.imag
     # external torques at the motor side, at the predicted mid-interval angle
-    th_mid = th0 + 0.5 * h * w0
-    tau_other = effects.position_load_torque_out(th_mid / c.N, c.load0 + s.tau_ext_out, c.load_g, c.load_phi,
-                                                 c.load_k, c.load_k0) / c.N
+    if c.has_position_load:
+        th_mid = th0 + 0.5 * h * w0
+        tau_other = effects.position_load_torque_out(th_mid / c.N, c.load0 + s.tau_ext_out, c.load_g,
+                                                     c.load_phi, c.load_k, c.load_k0) / c.N
+    else:
+        tau_other = (c.load0 + s.tau_ext_out) / c.N
     if c.cog_cos:
-        tau_other = tau_other + effects.cogging_torque(th_mid, c.cog_order, c.cog_cos, c.cog_sin)
+        tau_other = tau_other + effects.cogging_torque_mean(th0, h * w0, c.cog_order, c.cog_cos, c.cog_sin)
     # mechanical, implicit midpoint: J (w1 - w0)/h = K (A + B w) - b w - tau_other - tau_f, w = (w0 + w1)/2
     den = 2.0 * J / h + c.b - K * B
     num = 2.0 * J * w0 / h + K * A - tau_other
     if c.has_friction:
-        d0 = ops.sign(w0)
-        F_mov = effects.friction_magnitude(d0, abs(w0), c.tau_c, c.tau_asym, c.tau_s, c.omega_s)
-        w_mov = (num - d0 * F_mov) / den
-        crossed = ops.both(w0 * (2.0 * w_mov - w0) < 0.0, F_mov > 0.0)
-        push = ops.sign(num)                    # at rest: direction the rotor is pushed
-        F_st = effects.friction_magnitude(push, 0.0 * w0, c.tau_c, c.tau_asym, c.tau_s, c.omega_s)
-        stay = abs(num) <= F_st
-        moving = w0 != 0.0
-        w = ops.where(moving, ops.where(crossed, 0.5 * w0, w_mov), ops.where(stay, 0.0 * w0, (num - push * F_st) / den))
-        tau_f = ops.where(moving, ops.where(crossed, num - den * 0.5 * w0, d0 * F_mov),
-                          ops.where(stay, num, push * F_st))
+        w, tau_f = _friction(c, num, den, w0, h, ops)
     else:
         w = num / den
         tau_f = 0.0
     w1 = 2.0 * w - w0
     # electrical solution with that w
-    i_ss = iv + iw * w
-    d = i0 - i_ss
-    i1 = i_ss + d * E
-    i_mean = i_ss * (1.0 - phi1) + i0 * phi1
+    c1 = c1_w * (w - w0)
+    c0 = c0_v + c0_w * (w - w0)
+    d = i0 - c0
+    i1 = c0 + c1 * h + d * E
+    i_mean = c0 * (1.0 - phi1) + c1 * (0.5 * h) + i0 * phi1
+    # exact ∫|i|² dt and ∫ t i dt
     sigma2h = 2.0 * (R / L) * h
     phi2 = (1.0 - ops.exp(-sigma2h)) / sigma2h
-    joule = R * h * (abs(i_ss) ** 2 + 2.0 * (i_ss.conjugate() * d * phi1).real + abs(d) ** 2 * phi2)
+    psi1 = (1.0 - E * (1.0 + ah)) / (ah * ah)   # (1/h²) ∫ t e^{-at} dt
+    joule = R * h * (abs(c0) ** 2 + (c0.conjugate() * c1).real * h + abs(c1) ** 2 * h * h / 3.0
+                     + 2.0 * (d * (c0.conjugate() * phi1 + c1.conjugate() * h * psi1)).real
+                     + abs(d) ** 2 * phi2)
+    int_t_iq = (c0 * (0.5 * h * h) + c1 * (h ** 3 / 3.0) + d * (h * h) * psi1).imag
+    conv_el = K * (w0 * i_mean.imag * h + (2.0 * (w - w0) / h) * int_t_iq)   # ∫ K ω(t) i_q dt
+    conv_mech = K * i_mean.imag * w * h                                        # work of the mean torque
     dth = w * h
     # thermal: exact for the interval-mean Joule power
     p11, p12, p21, p22, G1, G2, i21, i22, g1 = c.thermal(h_ns)
@@ -333,10 +350,52 @@ def _advance(c: _Coeffs, s: _S, h_ns: int, ops) -> None:
     s.e_fric = s.e_fric + tau_f * dth
     s.e_load = s.e_load + tau_other * dth
     s.e_amb = s.e_amb + int_y2 / c.R_ha
+    s.e_disc = s.e_disc + (conv_el - conv_mech)
     # commit
+    s.acc = (w1 - w0) / h
     s.i, s.omega, s.theta = i1, w1, th0 + dth
     s.T_w, s.T_h = n1 + c.T_amb, n2 + c.T_amb
     s.t_ns = s.t_ns + h_ns
+
+
+def _friction(c: _Coeffs, num, den, w0, h, ops):
+    """Mean speed ``w`` and friction torque ``τ_f`` (constant over the interval) from the mechanical
+    balance ``den·w = num - τ_f`` (implicit midpoint, see :func:`_advance`), without a bristle state.
+
+    * moving: kinetic friction at the predicted mid-interval speed (one corrector pass, so a fast pass
+      through the Stribeck region is not evaluated at a stale speed);
+    * the speed would cross zero: up to the crossing time ``t*`` friction opposes the old direction; after
+      it the rotor either sticks (ends the interval at exactly 0, friction balancing the drive) or, when
+      the drive exceeds breakaway, slips the other way — friction is then the time-weighted mean of the
+      two phases, which keeps the result second-order accurate across step sizes;
+    * at rest: stays stuck while the drive torque is within static friction, else breaks away.
+    """
+    mag = lambda d, speed: effects.friction_magnitude(d, speed, c.tau_c, c.tau_asym, c.tau_s, c.omega_s)  # noqa: E731
+    J2h = 2.0 * c.J / h                       # den = J2h + (b - K B); num = J2h w0 + drive(0)
+    d0 = ops.sign(w0)
+    F0 = mag(d0, abs(w0))
+    w_pred = (num - d0 * F0) / den
+    F_mov = mag(d0, abs(ops.where(w_pred * w0 > 0.0, w_pred, 0.5 * w0)))
+    w_mov = (num - d0 * F_mov) / den
+    crossed = ops.both(w0 * (2.0 * w_mov - w0) < 0.0, F_mov > 0.0)
+    # drive torque (everything but friction and inertia) at the crossing, w ~ 0: num - J2h w0 - (den - J2h)*0
+    drive = num - J2h * w0
+    push = ops.sign(drive)
+    F_st = mag(push, 0.0 * w0)
+    breaks = abs(drive) > F_st
+    # crossing time: w0 + (drive - d0 F_mov) t*/J = 0
+    t_star = ops.clip(-c.J * w0 / ops.where(crossed, drive - d0 * F_mov, -1.0), 0.0, h)
+    f_cross = (t_star * d0 * F_mov + (h - t_star) * push * F_st) / h
+    w_rev = (num - f_cross) / den
+    reverses = ops.both(crossed, ops.both(breaks, push == -d0))
+    moving = w0 != 0.0
+    w = ops.where(moving,
+                  ops.where(reverses, w_rev, ops.where(crossed, 0.5 * w0, w_mov)),
+                  ops.where(breaks, (num - push * F_st) / den, 0.0 * w0))
+    tau_f = ops.where(moving,
+                      ops.where(reverses, f_cross, ops.where(crossed, num - den * 0.5 * w0, d0 * F_mov)),
+                      ops.where(breaks, push * F_st, drive))
+    return w, tau_f
 
 
 def _step(c: _Coeffs, s: _S, dt_ns: int, ops) -> None:
@@ -366,6 +425,7 @@ class _Base:
         s.t_ns = 0
         s.i = zeros + 0j
         s.omega = zeros + 0.0
+        s.acc = zeros + 0.0
         s.theta = zeros + 0.0
         s.T_w, s.T_h = T_w0, T_h0
         s.v = zeros + 0j
@@ -373,8 +433,9 @@ class _Base:
         s.i_ref = zeros + 0.0
         s.tripped = zeros != 0.0 if isinstance(zeros, np.ndarray) else False
         s.cmd_q = zeros + 0.0
+        s.v_cmd = None
         s.tau_ext_out = zeros + 0.0
-        s.e_in = s.e_joule = s.e_visc = s.e_fric = s.e_load = s.e_amb = zeros + 0.0
+        s.e_in = s.e_joule = s.e_visc = s.e_fric = s.e_load = s.e_amb = s.e_disc = zeros + 0.0
         return s
 
     def step(self, dt: float) -> None:
@@ -388,7 +449,7 @@ class _Base:
         c, s = self._c, self._s
         return dict(electrical_in=s.e_in, joule=s.e_joule, magnetic=0.5 * c.L * abs(s.i) ** 2,
                     kinetic=0.5 * c.J * s.omega ** 2, viscous=s.e_visc, friction=s.e_fric, load=s.e_load,
-                    heat_to_ambient=s.e_amb,
+                    heat_to_ambient=s.e_amb, discretization=s.e_disc,
                     thermal=c.C_w * (s.T_w - self._T0[0]) + c.C_h * (s.T_h - self._T0[1]))
 
     def _torque_to_current(self, tau_out):
@@ -421,12 +482,21 @@ class Actuator(_Base):
         if not math.isfinite(i_q_ref):
             raise ValueError(f"current command: expected a finite q-axis current [A], got {i_q_ref!r}")
         self._s.cmd_q = float(i_q_ref)
+        self._s.v_cmd = None
+
+    def set_voltage_command(self, v_d: float, v_q: float) -> None:
+        """Open-loop voltage mode [V, d-q power-invariant]: the current controller is bypassed (the
+        inverter still limits |v| to the SVPWM circle). A current or torque command ends it."""
+        if not (math.isfinite(v_d) and math.isfinite(v_q)):
+            raise ValueError(f"voltage command: expected finite d/q voltages [V], got {v_d!r}, {v_q!r}")
+        self._s.v_cmd = complex(v_d, v_q)
 
     def set_torque_command(self, tau_out: float) -> None:
         """Output-side torque command [N·m] → ``i_q_ref = τ / (K_t_q N)`` with the nominal K_t_q."""
         if not math.isfinite(tau_out):
             raise ValueError(f"torque command: expected a finite output torque [N*m], got {tau_out!r}")
         self._s.cmd_q = self._torque_to_current(float(tau_out))
+        self._s.v_cmd = None
 
     def set_load_torque(self, tau_out: float) -> None:
         """Extra external load torque at the output [N·m], added to ``load.load_torque``."""
