@@ -1,0 +1,170 @@
+"""``bldc-actuator simulate``: run a command profile through the model offline → CSV of every signal + PNG.
+
+Example::
+
+    bldc-actuator simulate --preset ak80_9 --profile chirp --amplitude 5 --f0 1 --f1 100 --duration 2
+    bldc-actuator simulate --params my_motor.yaml --profile csv --input commands.csv --out out/run1
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from . import profiles
+from .model import Actuator, SimResult
+from .params import ActuatorParams, ParameterError, load_preset, load_yaml
+
+#: columns written to the CSV, in order, with units
+CSV_COLUMNS = [
+    ("t", "s"), ("command", "A or N*m"), ("i_q_ref", "A"), ("i_q", "A"), ("i_d", "A"), ("v_q", "V"), ("v_d", "V"),
+    ("v_magnitude_q", "V"), ("v_limit_q", "V"), ("voltage_saturated", "bool"), ("omega", "rad/s"),
+    ("theta", "rad"), ("position_out", "rad"), ("velocity_out", "rad/s"), ("torque_em", "N*m"),
+    ("effort_out", "N*m"), ("i_phase_a", "A"), ("i_phase_b", "A"), ("i_phase_c", "A"), ("i_line_a", "A"),
+    ("i_line_b", "A"), ("i_line_c", "A"), ("T_winding", "degC"), ("T_housing", "degC"),
+    ("resistance_phase", "ohm"), ("joule_power", "W"), ("current_limit_effective", "A"),
+]
+
+
+def positive(name):
+    def parse(text):
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name}: expected a number, got {text!r}") from None
+        if not value > 0:
+            raise argparse.ArgumentTypeError(f"{name}: expected > 0, got {value!r}")
+        return value
+    return parse
+
+
+def register(sub) -> None:
+    p = sub.add_parser("simulate", help="run a command profile through the model; write CSV + PNG",
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    src = p.add_mutually_exclusive_group()
+    src.add_argument("--preset", help="preset name from config/ (e.g. ak80_9); default: built-in defaults")
+    src.add_argument("--params", type=Path, help="parameter YAML (node layout)")
+    p.add_argument("--profile", choices=["step", "chirp", "sine", "csv"], default="step")
+    p.add_argument("--kind", choices=profiles.KINDS, default="current",
+                   help="command meaning: q-axis current [A] or output torque [N*m]")
+    p.add_argument("--amplitude", type=float, default=5.0, help="command amplitude [A or N*m]")
+    p.add_argument("--offset", type=float, default=0.0, help="sine offset [A or N*m]")
+    p.add_argument("--frequency", type=positive("--frequency"), default=2.0, help="sine frequency [Hz]")
+    p.add_argument("--f0", type=positive("--f0"), default=1.0, help="chirp start frequency [Hz]")
+    p.add_argument("--f1", type=positive("--f1"), default=100.0, help="chirp end frequency [Hz]")
+    p.add_argument("--duration", type=positive("--duration"), default=1.0, help="[s]")
+    p.add_argument("--rate", type=positive("--rate"), default=1000.0, help="command and output sample rate [Hz]")
+    p.add_argument("--input", type=Path, help="CSV of commands for --profile csv (time, current_command or "
+                   "torque_command, optional load_torque)")
+    p.add_argument("--load-torque", type=float, default=None, help="constant external load at the output [N*m]")
+    p.add_argument("--out", type=Path, default=Path("out/simulate"), help="output prefix (writes PREFIX.csv/.png)")
+    p.add_argument("--no-plot", action="store_true", help="skip the PNG")
+    p.set_defaults(func=run)
+
+
+def load_params(args) -> ActuatorParams:
+    if args.params:
+        return load_yaml(args.params)
+    if args.preset:
+        return load_preset(args.preset)
+    return ActuatorParams()
+
+
+def build_profile(args) -> profiles.Profile:
+    if args.profile == "csv":
+        if not args.input:
+            raise ValueError("--input: required with --profile csv (a CSV with time and a command column)")
+        return profiles.from_csv(args.input)
+    if args.profile == "step":
+        return profiles.step(args.amplitude, args.duration, t_step=min(0.05, args.duration / 10), rate=args.rate,
+                             kind=args.kind)
+    if args.profile == "sine":
+        return profiles.sine(args.amplitude, args.frequency, args.duration, args.rate, args.kind, args.offset)
+    return profiles.chirp(args.amplitude, args.f0, args.f1, args.duration, args.rate, args.kind)
+
+
+def write_csv(result: SimResult, path: Path) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow([f"{name} [{unit}]" for name, unit in CSV_COLUMNS])
+        cols = [result[name] for name, _ in CSV_COLUMNS]
+        for row in zip(*cols):
+            w.writerow([f"{x:.9g}" for x in row])
+
+
+def plot(result: SimResult, path: Path, title: str = "") -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t = result["t"]
+    fig, ax = plt.subplots(5, 1, figsize=(10, 12), sharex=False)
+    ax[0].plot(t, result["i_q_ref"], "k--", lw=1, label="i_q ref")
+    ax[0].plot(t, result["i_q"], label="i_q")
+    ax[0].plot(t, result["i_d"], label="i_d")
+    ax[0].set_ylabel("q-axis current [A]")
+    ax[1].plot(t, result["v_magnitude_q"], label="|v_dq|")
+    ax[1].plot(t, result["v_limit_q"], "r--", label="SVPWM limit")
+    ax[1].plot(t, result["v_q"], lw=0.8, label="v_q")
+    ax[1].set_ylabel("voltage [V]")
+    ax[2].plot(t, result["velocity_out"], label="output speed")
+    ax[2].set_ylabel("speed [rad/s]")
+    ax[3].plot(t, result["T_winding"], label="winding")
+    ax[3].plot(t, result["T_housing"], label="housing")
+    ax[3].set_ylabel("temperature [°C]")
+    # phase currents over the last few electrical periods (they are sinusoids at p·ω)
+    n = max(10, min(len(t), 200))
+    for key in ("i_phase_a", "i_phase_b", "i_phase_c"):
+        ax[4].plot(t[-n:], result[key][-n:], label=key[-1].upper() if key != "i_phase_a" else "A")
+    ax[4].set_ylabel("phase current [A]\n(at the output rate)")
+    for a in ax:
+        a.legend(loc="upper right", fontsize=8)
+        a.grid(alpha=0.3)
+    ax[-1].set_xlabel("time [s]")
+    ax[-2].set_xlabel("time [s]")
+    fig.suptitle(title)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def summary(result: SimResult) -> str:
+    sat = float(np.mean(result["voltage_saturated"])) * 100
+    return (f"duration {result['t'][-1]:.3f} s, samples {len(result['t'])}\n"
+            f"peak |i_q| {np.max(np.abs(result['i_q'])):.3f} A, peak output speed "
+            f"{np.max(np.abs(result['velocity_out'])):.3f} rad/s, voltage saturated {sat:.1f} % of samples\n"
+            f"winding temperature {result['T_winding'][0]:.2f} -> {result['T_winding'][-1]:.2f} degC "
+            f"(peak {np.max(result['T_winding']):.2f})")
+
+
+def run(args) -> int:
+    try:
+        params = load_params(args)
+        if args.load_torque is not None:
+            params = params.replace(**{"load.load_torque": args.load_torque})
+        prof = build_profile(args)
+    except (ParameterError, ValueError) as exc:
+        print(f"bldc-actuator simulate: {exc}", file=sys.stderr)
+        return 2
+    act = Actuator(params)
+    result = act.run(prof)
+    csv_path = args.out.with_suffix(".csv")
+    write_csv(result, csv_path)
+    print(f"wrote {csv_path} ({len(CSV_COLUMNS)} columns)")
+    if not args.no_plot:
+        png = args.out.with_suffix(".png")
+        plot(result, png, title=f"{prof.name} ({prof.kind}), {args.preset or args.params or 'defaults'}")
+        print(f"wrote {png}")
+    print(summary(result))
+    e = act.energy
+    print(f"energy: in {e.electrical_in:.6g} J = Joule {e.joule:.6g} + mechanical "
+          f"{e.viscous + e.friction + e.load:.6g} + stored {e.kinetic + e.magnetic:.6g} "
+          f"(residual {e.residual(Actuator(params).energy):.2e} J)")
+    return 0

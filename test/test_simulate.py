@@ -1,0 +1,58 @@
+"""`bldc-actuator simulate` end to end, and command profiles from CSV."""
+
+import csv
+
+import numpy as np
+import pytest
+
+from bldc_actuator import profiles
+from bldc_actuator.cli import main
+
+
+def test_simulate_csv_profile_writes_all_signals(tmp_path, capsys):
+    src = tmp_path / "cmd.csv"
+    src.write_text("time,torque_command,load_torque\n0,0,0\n0.01,0.5,0\n0.2,0.5,0.2\n0.3,0,0\n")
+    rc = main(["simulate", "--profile", "csv", "--input", str(src), "--out", str(tmp_path / "run"),
+               "--no-plot", "--preset", "ak80_9"])
+    assert rc == 0
+    with (tmp_path / "run.csv").open() as fh:
+        rows = list(csv.reader(fh))
+    header = rows[0]
+    assert header[0] == "t [s]" and "i_phase_a [A]" in header and "T_winding [degC]" in header
+    data = np.array(rows[1:], dtype=float)
+    t = data[:, 0]
+    assert t[-1] == pytest.approx(0.3)
+    # torque command 0.5 N*m at the output of a 9:1 gear: i_q_ref = 0.5 / (9 K_t_q)
+    from bldc_actuator.params import load_preset
+    p = load_preset("ak80_9")
+    iref = data[:, header.index("i_q_ref [A]")]
+    assert np.max(iref) == pytest.approx(0.5 / (9 * p.motor.torque_constant_q), rel=1e-9)
+    out = capsys.readouterr().out
+    assert "residual" in out
+
+
+def test_simulate_png(tmp_path):
+    rc = main(["simulate", "--profile", "chirp", "--duration", "0.2", "--out", str(tmp_path / "c")])
+    assert rc == 0
+    png = (tmp_path / "c.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
+
+
+def test_csv_profile_errors_name_the_line(tmp_path):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("time,current_command\n0,1\n0.1,abc\n")
+    with pytest.raises(ValueError, match=r"bad.csv:3"):
+        profiles.from_csv(bad)
+    bad.write_text("time,current_command\n0,1\n0.1,2\n0.05,3\n")
+    with pytest.raises(ValueError, match="strictly increasing"):
+        profiles.from_csv(bad)
+    bad.write_text("t,current_command\n0,1\n")
+    with pytest.raises(ValueError, match="'time'"):
+        profiles.from_csv(bad)
+
+
+def test_simulate_bad_arguments_exit_2(tmp_path, capsys):
+    assert main(["simulate", "--preset", "no_such_motor", "--out", str(tmp_path / "x")]) == 2
+    assert "no preset named" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["simulate", "--duration", "-1"])
