@@ -1,0 +1,636 @@
+"""ROS 2 node ``actuator_node``: the virtual BLDC actuator (:class:`bldc_actuator.model.Actuator`) on topics.
+
+Inputs (commands hold until replaced)
+    ``~/current_command``  std_msgs/Float64            q-axis current [A]
+    ``~/torque_command``   std_msgs/Float64            output torque [N*m]
+    ``~/commands``         std_msgs/Float64MultiArray  ros2_control ForwardCommandController: one element,
+                                                       meaning set by ``node.commands_interface``
+    ``~/load_torque``      std_msgs/Float64            extra external load at the output [N*m]
+    ``~/reset_fault``      std_msgs/Empty              clears a latched over-temperature trip
+Outputs (stamped with SIMULATION time, at ``node.publish_rate`` per simulated second)
+    ``joint_states``         sensor_msgs/JointState     output position [rad], velocity [rad/s], effort [N*m]
+    ``~/phase_currents``     std_msgs/Float64MultiArray i_phase_a, i_phase_b, i_phase_c [A] (winding currents)
+    ``~/q_axis_state``       std_msgs/Float64MultiArray :data:`Q_AXIS_FIELDS` (labelled layout)
+    ``~/winding_temperature``, ``~/housing_temperature``  sensor_msgs/Temperature [degC]
+    ``/diagnostics``         diagnostic_msgs/DiagnosticArray at ``node.diagnostics_rate`` (simulated)
+    ``/clock``               rosgraph_msgs/Clock when ``node.publish_clock``
+
+Time: a timer on the STEADY clock (never the node clock: with ``use_sim_time`` and our own ``/clock`` that
+would deadlock) advances the model by ``time_factor`` x the elapsed wall time, in whole publish periods;
+``time_factor`` 0 or inf runs as fast as possible (batches of periods between executor spins);
+``node.lock_step`` advances exactly one period per received command instead.
+
+Parameters: see :mod:`bldc_actuator.node_params`. ``actuator_node --help`` lists them.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import threading
+import time
+from collections import deque
+from typing import Any
+
+import rclpy
+from builtin_interfaces.msg import Time as TimeMsg
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import ParameterEvent, SetParametersResult
+from rclpy.clock import Clock, ClockType
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile
+from rclpy.task import Future
+from rosgraph_msgs.msg import Clock as ClockMsg
+from sensor_msgs.msg import JointState, Temperature
+from std_msgs.msg import Empty, Float64, Float64MultiArray, MultiArrayDimension
+
+from . import node_params as NP
+from .model import Actuator
+from .params import SPECS, ParameterError, from_flat
+
+NODE_NAME = "bldc_actuator"
+
+#: element order of ``~/q_axis_state`` (units: A, A, A, V, V, V, V, V, rad/s motor side, N*m motor side,
+#: A, W, ohm, 1 if saturated, 1 if tripped); also in the message layout label, comma-separated
+Q_AXIS_FIELDS = ("i_q", "i_d", "i_q_ref", "v_q", "v_d", "v_limit_q", "bus_voltage", "v_magnitude_q",
+                 "omega", "torque_em", "current_limit_effective", "joule_power", "resistance_phase",
+                 "voltage_saturated", "tripped")
+PHASE_FIELDS = ("i_phase_a", "i_phase_b", "i_phase_c")
+
+#: a command beyond this multiple of the drive's current limit (in current) is rejected as absurd;
+#: commands between 1x and this are accepted and limited by the drive like a real one would
+ABSURD_FACTOR = 10.0
+#: diagnostics level ERROR once thermal derating has cut the current limit by more than this fraction
+DERATE_ERROR_FRACTION = 0.5
+#: longest wall time one timer callback may spend stepping before yielding to the executor [s]
+MAX_BATCH_WALL = 0.02
+#: subscription queue depth of the command topics
+COMMAND_QUEUE_DEPTH = 100
+
+OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
+
+
+def labelled_layout(msg: Float64MultiArray, labels: tuple[str, ...]) -> Float64MultiArray:
+    msg.layout.dim = [MultiArrayDimension(label=",".join(labels), size=len(labels), stride=len(labels))]
+    return msg
+
+
+def layout_labels(msg: Float64MultiArray) -> list[str]:
+    """Element names of a message published by this node (``~/q_axis_state``, ``~/phase_currents``)."""
+    return msg.layout.dim[0].label.split(",") if msg.layout.dim else []
+
+
+def _stamp(t_ns: int) -> TimeMsg:
+    return TimeMsg(sec=t_ns // 1_000_000_000, nanosec=t_ns % 1_000_000_000)
+
+
+class ActuatorNode(Node):
+    """The actuator node. Construct after ``rclpy.init``; add to an executor; ``done`` completes when
+    ``node.max_sim_time`` is reached. Call :meth:`close` (or ``destroy_node``) to finish a recording."""
+
+    def __init__(self, node_name: str = NODE_NAME, *, namespace: str | None = None, context=None,
+                 cli_args: list[str] | None = None, parameter_overrides: list[Parameter] | None = None,
+                 start: bool = True):
+        super().__init__(node_name, namespace=namespace, context=context, cli_args=cli_args,
+                         parameter_overrides=parameter_overrides)
+        self._lock = threading.RLock()
+        self.recorder = None
+        self._timer = None
+        self.done = Future()
+        try:
+            self.params, nv, self.preset = NP.declare_all(self)
+        except BaseException:
+            self.destroy_node()
+            raise
+        self.node_values = nv
+        self.actuator = Actuator(self.params)
+        self.period_ns = int(round(1e9 / nv["node.publish_rate"]))
+        self.diag_period_ns = max(self.period_ns, int(round(1e9 / nv["node.diagnostics_rate"])))
+        self.joint_name = nv["node.joint_name"]
+        self.lock_step = nv["node.lock_step"]
+        self.max_sim_ns = int(round(nv["node.max_sim_time"] * 1e9))
+        self._watchdog_ns = int(round(nv["node.watchdog_timeout"] * 1e9))
+        self._time_factor = nv["node.time_factor"]
+        self._commands_interface = nv["node.commands_interface"]
+
+        # command state
+        self.command_kind = "current"            # "current" [A] | "torque" [N*m]
+        self.command_value = 0.0
+        self._last_command_ns: int | None = None  # watchdog armed by the first command
+        self.watchdog_active = False
+        self.commands_received = 0
+        self.commands_rejected = 0
+        self.last_rejection = ""
+        self.rejections: deque[str] = deque(maxlen=100)   # recent rejection reasons, newest last
+        self.load_torque_extra = 0.0
+        # diagnostics window
+        self._next_diag_ns = 0
+        self._win_periods = 0
+        self._win_saturated = 0
+        self._win_rejected = 0
+        self._win_wall0 = time.monotonic_ns()
+        self._win_sim0 = 0
+        self.real_time_factor = float("nan")
+        self.slips = 0
+        self._win_slips = 0
+        self.periods = 0
+
+        qos = QoSProfile(depth=10)
+        self._qos = qos
+        self.pub_joint = self.create_publisher(JointState, "joint_states", qos)
+        self.pub_phase = self.create_publisher(Float64MultiArray, "~/phase_currents", qos)
+        self.pub_q = self.create_publisher(Float64MultiArray, "~/q_axis_state", qos)
+        self.pub_tw = self.create_publisher(Temperature, "~/winding_temperature", qos)
+        self.pub_th = self.create_publisher(Temperature, "~/housing_temperature", qos)
+        self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", qos)
+        self.pub_clock = self.create_publisher(ClockMsg, "/clock", qos) if nv["node.publish_clock"] else None
+        # deep command queues: in lock-step mode every command counts (one period each), even in bursts
+        cq = QoSProfile(depth=COMMAND_QUEUE_DEPTH)
+        self.sub_current = self.create_subscription(Float64, "~/current_command", self._on_current, cq)
+        self.sub_torque = self.create_subscription(Float64, "~/torque_command", self._on_torque, cq)
+        self.sub_commands = self.create_subscription(Float64MultiArray, "~/commands", self._on_commands, cq)
+        self.sub_load = self.create_subscription(Float64, "~/load_torque", self._on_load, cq)
+        self.sub_reset = self.create_subscription(Empty, "~/reset_fault", self._on_reset, qos)
+
+        # reusable messages (rclpy serialises at publish; reuse is safe)
+        self._m_joint = JointState(name=[self.joint_name])
+        self._m_joint.header.frame_id = self.joint_name
+        self._m_phase = labelled_layout(Float64MultiArray(), PHASE_FIELDS)
+        self._m_q = labelled_layout(Float64MultiArray(), Q_AXIS_FIELDS)
+        self._m_tw = Temperature()
+        self._m_tw.header.frame_id = self.joint_name
+        self._m_th = Temperature()
+        self._m_th.header.frame_id = self.joint_name
+        self._m_clock = ClockMsg()
+        self._outputs = (self.pub_joint, self._m_joint), (self.pub_phase, self._m_phase), \
+            (self.pub_q, self._m_q), (self.pub_tw, self._m_tw), (self.pub_th, self._m_th)
+
+        record = nv["node.record"]
+        if record:
+            self._open_recorder(record)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+        if start:
+            self.start()
+
+    # ------------------------------------------------------------------------------------ lifecycle
+
+    def start(self) -> None:
+        """Publish the initial state and start stepping (a steady-clock timer unless lock-step)."""
+        with self._lock:
+            self._publish_state()
+            if self._timer is None and not self.lock_step:
+                self._anchor()
+                self._timer = self.create_timer(max(self.period_ns * 1e-9, 1e-3), self._on_tick,
+                                                clock=self._steady)
+
+    def close(self) -> None:
+        """Stop stepping and finalise the recording (idempotent)."""
+        with self._lock:
+            if self._timer is not None:
+                self.destroy_timer(self._timer)
+                self._timer = None
+            if self.recorder is not None:
+                rec, self.recorder = self.recorder, None
+                rec.close()
+                # after a shutdown the node's logger cannot publish to /rosout any more
+                logger = self.get_logger() if self.context.ok() else rclpy.logging.get_logger(self.get_name())
+                logger.info(f"recording finished: {self.node_values['node.record']}")
+
+    def destroy_node(self):
+        try:
+            self.close()
+        finally:
+            return super().destroy_node()
+
+    @property
+    def t_ns(self) -> int:
+        """Simulation time [ns]."""
+        return self.actuator.t_ns
+
+    @property
+    def finished(self) -> bool:
+        return self.done.done()
+
+    # ------------------------------------------------------------------------------------ stepping
+
+    def _anchor(self) -> None:
+        """Tie simulation time to the steady clock now (half a period ahead, so ticks land mid-period)."""
+        f = self._time_factor
+        self._anchor_sim = self.actuator.t_ns
+        self._anchor_wall = time.monotonic_ns() - (int(self.period_ns / (2 * f)) if 0 < f < math.inf else 0)
+
+    @property
+    def as_fast_as_possible(self) -> bool:
+        return self._time_factor == 0.0 or math.isinf(self._time_factor)
+
+    def _on_tick(self) -> None:
+        with self._lock:
+            if self.finished:
+                return
+            now = time.monotonic_ns()
+            if self.as_fast_as_possible:
+                deadline = time.perf_counter() + MAX_BATCH_WALL
+                while not self.finished:
+                    self._advance_period()
+                    if time.perf_counter() >= deadline:
+                        break
+                return
+            target = self._anchor_sim + int((now - self._anchor_wall) * self._time_factor)
+            n = (target - self.actuator.t_ns) // self.period_ns
+            limit = max(1, int(MAX_BATCH_WALL * self._time_factor * 1e9 / self.period_ns))
+            if n > limit:  # cannot keep up: drop the debt instead of bursting later
+                self.slips += 1
+                self._win_slips += 1
+                self._anchor_sim = self.actuator.t_ns + limit * self.period_ns
+                self._anchor_wall = now
+                n = limit
+            for _ in range(n):
+                self._advance_period()
+                if self.finished:
+                    break
+
+    def advance(self, periods: int = 1) -> None:
+        """Advance ``periods`` publish periods now (public for tests, benchmarks and embedding)."""
+        with self._lock:
+            for _ in range(periods):
+                if self.finished:
+                    break
+                self._advance_period()
+
+    def _advance_period(self) -> None:
+        act = self.actuator
+        t = act.t_ns
+        if (self._watchdog_ns > 0 and self._last_command_ns is not None and not self.watchdog_active
+                and t - self._last_command_ns >= self._watchdog_ns):
+            self.watchdog_active = True
+            act.set_current_command(0.0)
+            self.get_logger().warning(
+                f"command watchdog: no command for {self._watchdog_ns * 1e-9:g} s of simulation time; "
+                "current command set to zero until the next command")
+        step = self.period_ns
+        if self.max_sim_ns:
+            step = min(step, self.max_sim_ns - t)
+        if step > 0:
+            act.step_ns(step)
+        self.periods += 1
+        self._publish_state()
+        if self.max_sim_ns and act.t_ns >= self.max_sim_ns and not self.done.done():
+            self.get_logger().info(f"node.max_sim_time reached ({act.t_ns * 1e-9:g} s)")
+            self.done.set_result(act.t_ns)
+
+    # ------------------------------------------------------------------------------------ publishing
+
+    def _publish_state(self) -> None:
+        act = self.actuator
+        o = act.outputs()
+        t_ns = act.t_ns
+        stamp = _stamp(t_ns)
+        j = self._m_joint
+        j.header.stamp = stamp
+        j.position = [float(o["position_out"])]
+        j.velocity = [float(o["velocity_out"])]
+        j.effort = [float(o["effort_out"])]
+        self._m_phase.data = [float(o[k]) for k in PHASE_FIELDS]
+        self._m_q.data = [float(o[k]) for k in Q_AXIS_FIELDS]
+        self._m_tw.header.stamp = stamp
+        self._m_tw.temperature = float(o["T_winding"])
+        self._m_th.header.stamp = stamp
+        self._m_th.temperature = float(o["T_housing"])
+        if self.pub_clock is not None:
+            self._m_clock.clock = stamp
+            self.pub_clock.publish(self._m_clock)
+            if self.recorder is not None:
+                self._write(self.pub_clock.topic_name, self._m_clock, t_ns)
+        for pub, msg in self._outputs:
+            pub.publish(msg)
+            if self.recorder is not None:
+                self._write(pub.topic_name, msg, t_ns)
+        self._win_periods += 1
+        self._win_saturated += bool(o["voltage_saturated"])
+        if t_ns >= self._next_diag_ns:
+            self._publish_diagnostics(o, t_ns)
+            self._next_diag_ns = t_ns - t_ns % self.diag_period_ns + self.diag_period_ns
+
+    def diagnostic_status(self, o: dict | None = None) -> DiagnosticStatus:
+        """The node's current diagnostics entry (level, message, key values); also resets the window."""
+        act, p = self.actuator, self.params
+        o = act.outputs() if o is None else o
+        t_ns = act.t_ns
+        wall = time.monotonic_ns()
+        if wall > self._win_wall0 and t_ns > self._win_sim0:
+            self.real_time_factor = (t_ns - self._win_sim0) / (wall - self._win_wall0)
+        sat = self._win_saturated / self._win_periods if self._win_periods else 0.0
+        level, why = OK, []
+        lim_eff, lim = float(o["current_limit_effective"]), p.drive.current_limit
+        T_w = float(o["T_winding"])
+        if o["tripped"]:
+            level = ERROR
+            why.append(f"over-temperature TRIP (winding {T_w:.1f} degC, trip at {p.drive.trip_temperature:g}); "
+                       "latched: publish std_msgs/Empty on ~/reset_fault")
+        elif lim_eff < (1.0 - DERATE_ERROR_FRACTION) * lim:
+            level = ERROR
+            why.append(f"thermal derating beyond {DERATE_ERROR_FRACTION:.0%}: current limit {lim_eff:.2f} of "
+                       f"{lim:g} A (winding {T_w:.1f} degC)")
+        elif T_w > p.drive.derate_temperature:
+            level = WARN
+            why.append(f"thermal derating: winding {T_w:.1f} degC > {p.drive.derate_temperature:g}; "
+                       f"current limit {lim_eff:.2f} of {lim:g} A")
+        if sat > 0:
+            level = max(level, WARN)
+            why.append(f"voltage saturation {sat:.0%} of the last {self._win_periods} periods")
+        if self.watchdog_active:
+            level = max(level, WARN)
+            why.append(f"command watchdog: no command for {self._watchdog_ns * 1e-9:g} s, holding zero current")
+        if self._win_rejected:
+            level = max(level, WARN)
+            why.append(f"{self._win_rejected} command(s) rejected: {self.last_rejection}")
+        if self._win_slips:
+            level = max(level, WARN)
+            why.append(f"cannot keep time_factor {self._time_factor:g} (achieved {self.real_time_factor:.2f})")
+        values = {
+            "sim_time [s]": f"{t_ns * 1e-9:.6f}",
+            "real_time_factor": f"{self.real_time_factor:.3f}",
+            "mode": "lock_step" if self.lock_step else
+                    "as_fast_as_possible" if self.as_fast_as_possible else f"time_factor {self._time_factor:g}",
+            "command": f"{self.command_kind} {self.command_value:g}",
+            "i_q [A]": f"{o['i_q']:.4f}", "i_q_ref [A]": f"{o['i_q_ref']:.4f}",
+            "v_magnitude_q [V]": f"{o['v_magnitude_q']:.4f}", "v_limit_q [V]": f"{o['v_limit_q']:.4f}",
+            "voltage_saturated_fraction": f"{sat:.3f}",
+            "velocity_out [rad/s]": f"{o['velocity_out']:.4f}", "effort_out [N*m]": f"{o['effort_out']:.4f}",
+            "winding_temperature [degC]": f"{T_w:.3f}",
+            "housing_temperature [degC]": f"{o['T_housing']:.3f}",
+            "current_limit_effective [A]": f"{lim_eff:.4f}",
+            "tripped": str(bool(o["tripped"])).lower(),
+            "watchdog_active": str(self.watchdog_active).lower(),
+            "commands_received": str(self.commands_received),
+            "commands_rejected": str(self.commands_rejected),
+            "last_rejection": self.last_rejection,
+        }
+        status = DiagnosticStatus(level=level, name=f"{self.get_fully_qualified_name()}: actuator",
+                                  message="; ".join(why) if why else "OK",
+                                  hardware_id=self.joint_name,
+                                  values=[KeyValue(key=k, value=v) for k, v in values.items()])
+        self._win_periods = self._win_saturated = self._win_rejected = self._win_slips = 0
+        self._win_wall0, self._win_sim0 = wall, t_ns
+        return status
+
+    def _publish_diagnostics(self, o: dict, t_ns: int) -> None:
+        msg = DiagnosticArray(status=[self.diagnostic_status(o)])
+        msg.header.stamp = _stamp(t_ns)
+        self.pub_diag.publish(msg)
+        if self.recorder is not None:
+            self._write(self.pub_diag.topic_name, msg, t_ns)
+
+    # ------------------------------------------------------------------------------------ commands
+
+    def _reject(self, topic: str, reason: str) -> None:
+        self.commands_rejected += 1
+        self._win_rejected += 1
+        self.last_rejection = f"{topic}: {reason}"
+        self.rejections.append(self.last_rejection)
+        self.get_logger().warning(f"rejected command on {topic}: {reason}", throttle_duration_sec=1.0)
+
+    def _record_in(self, sub, msg) -> None:
+        if self.recorder is not None:
+            self._write(sub.topic_name, msg, self.actuator.t_ns)
+
+    def _absurd_limit(self, kind: str) -> float:
+        i_max = ABSURD_FACTOR * self.params.drive.current_limit
+        if kind == "current":
+            return i_max
+        return i_max * self.params.motor.torque_constant_q * self.params.gear.gear_ratio
+
+    def _command(self, sub, kind: str, value) -> None:
+        """Validate and apply one command; in lock-step mode advance one period (also after a rejection,
+        so a controller waiting for joint_states never stalls)."""
+        with self._lock:
+            try:
+                unit = "A" if kind == "current" else "N*m"
+                if not isinstance(value, float) or not math.isfinite(value):
+                    self._reject(sub.topic_name, f"{kind} command must be a finite number [{unit}], got {value!r}")
+                elif abs(value) > self._absurd_limit(kind):
+                    self._reject(sub.topic_name, f"{kind} command {value:g} {unit} is absurd (more than "
+                                 f"{ABSURD_FACTOR:g} x drive.current_limit: |value| <= "
+                                 f"{self._absurd_limit(kind):g} {unit})")
+                else:
+                    if kind == "current":
+                        self.actuator.set_current_command(value)
+                    else:
+                        self.actuator.set_torque_command(value)
+                    self.command_kind, self.command_value = kind, value
+                    self.commands_received += 1
+                    self._last_command_ns = self.actuator.t_ns
+                    if self.watchdog_active:
+                        self.watchdog_active = False
+                        self.get_logger().info("command watchdog cleared: commands are back")
+            except Exception as exc:  # noqa: BLE001 - the node never dies on a message
+                self._reject(sub.topic_name, f"{type(exc).__name__}: {exc}")
+            if self.lock_step and not self.finished:
+                self._advance_period()
+
+    def _on_current(self, msg: Float64) -> None:
+        self._record_in(self.sub_current, msg)
+        self._command(self.sub_current, "current", msg.data)
+
+    def _on_torque(self, msg: Float64) -> None:
+        self._record_in(self.sub_torque, msg)
+        self._command(self.sub_torque, "torque", msg.data)
+
+    def _on_commands(self, msg: Float64MultiArray) -> None:
+        self._record_in(self.sub_commands, msg)
+        kind = "torque" if self._commands_interface == "effort" else "current"
+        if len(msg.data) != 1:
+            with self._lock:
+                self._reject(self.sub_commands.topic_name,
+                             f"expected 1 element (one joint, {self._commands_interface}), got {len(msg.data)}")
+                if self.lock_step and not self.finished:
+                    self._advance_period()
+            return
+        self._command(self.sub_commands, kind, float(msg.data[0]))
+
+    def _on_load(self, msg: Float64) -> None:
+        self._record_in(self.sub_load, msg)
+        with self._lock:
+            v = msg.data
+            if not math.isfinite(v) or abs(v) > SPECS["load.load_torque"].range[1]:
+                self._reject(self.sub_load.topic_name, f"load torque must be finite and within "
+                             f"+-{SPECS['load.load_torque'].range[1]:g} N*m, got {v!r}")
+                return
+            self.actuator.set_load_torque(v)
+            self.load_torque_extra = v
+
+    def _on_reset(self, msg: Empty) -> None:
+        self._record_in(self.sub_reset, msg)
+        with self._lock:
+            was = self.actuator.state.tripped
+            self.actuator.reset_fault()
+            self.get_logger().info("fault reset" + ("" if was else " (no trip was latched)"))
+
+    # ------------------------------------------------------------------------------------ parameters
+
+    def _on_set_parameters(self, plist: list[Parameter]) -> SetParametersResult:
+        model: dict[str, Any] = {}
+        node: dict[str, Any] = {}
+        try:
+            for p in plist:
+                if p.name in SPECS:
+                    model[p.name] = NP.from_ros(SPECS[p.name].type, p.value)
+                elif p.name in NP.NODE_PARAMS:
+                    node[p.name] = NP.check_node_value(p.name, p.value)
+            new = from_flat(model, base=self.params) if model else None
+        except ParameterError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        with self._lock:
+            if new is not None:
+                self.actuator.update_params(new)
+                self.params = new
+            for name, value in node.items():
+                self.node_values[name] = value
+                if name == "node.time_factor":
+                    self._time_factor = value
+                    if not self.lock_step:
+                        self._anchor()
+                elif name == "node.watchdog_timeout":
+                    self._watchdog_ns = int(round(value * 1e9))
+                elif name == "node.commands_interface":
+                    self._commands_interface = value
+            if self.recorder is not None and (model or node):
+                ev = ParameterEvent(node=self.get_fully_qualified_name(),
+                                    changed_parameters=[p.to_parameter_msg() for p in plist])
+                ev.stamp = _stamp(self.actuator.t_ns)
+                self._write("/parameter_events", ev, self.actuator.t_ns)
+                if self.recorder is not None:
+                    self.recorder.set_parameters(self.all_parameters())
+        return SetParametersResult(successful=True)
+
+    def all_parameters(self) -> dict[str, Any]:
+        """Flat dict of everything that defines the run: every model parameter, ``node.*``, ``preset``."""
+        out: dict[str, Any] = {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.params.to_flat().items()}
+        out.update(self.node_values)
+        out["preset"] = self.preset
+        return out
+
+    # ------------------------------------------------------------------------------------ recording
+
+    def _write(self, topic: str, msg, t_ns: int) -> None:
+        rec = self.recorder
+        if rec.closed:   # finalised from outside (signal finalizer, atexit): stop recording quietly
+            self.recorder = None
+            return
+        rec.write(topic, msg, t_ns)
+
+    def _open_recorder(self, path: str) -> None:
+        from .recording import McapRecorder
+
+        meta = {"node": self.get_fully_qualified_name(), "joint_name": self.joint_name,
+                "time": "log_time = simulation time [ns]", "package": "bldc_actuator"}
+        self.recorder = McapRecorder(path, parameters=self.all_parameters(), metadata=meta)
+        topics = [(self.pub_joint, JointState), (self.pub_phase, Float64MultiArray),
+                  (self.pub_q, Float64MultiArray), (self.pub_tw, Temperature), (self.pub_th, Temperature),
+                  (self.pub_diag, DiagnosticArray), (self.sub_current, Float64), (self.sub_torque, Float64),
+                  (self.sub_commands, Float64MultiArray), (self.sub_load, Float64), (self.sub_reset, Empty)]
+        if self.pub_clock is not None:
+            topics.append((self.pub_clock, ClockMsg))
+        for ent, mtype in topics:
+            self.recorder.add_topic(ent.topic_name, mtype, self._qos)
+        self.recorder.add_topic("/parameter_events", ParameterEvent, self._qos)
+        self.get_logger().info(f"recording to {path}")
+
+
+# ---------------------------------------------------------------------------------------------- main
+
+USAGE = """\
+usage: actuator_node [--record PATH] [--ros-args --params-file FILE -p name:=value ...]
+
+Virtual BLDC actuator node (bldc_actuator). Every model parameter has a default: it runs without a
+parameter file. --record PATH records commands, outputs and parameters to an MCAP file (same as
+-p node.record:=PATH). Stops on Ctrl-C / SIGTERM, or after node.max_sim_time seconds of simulation.
+
+Topics (relative to the namespace; ~ = the node's private namespace):
+  in : ~/current_command, ~/torque_command (std_msgs/Float64), ~/commands (std_msgs/Float64MultiArray),
+       ~/load_torque (std_msgs/Float64), ~/reset_fault (std_msgs/Empty)
+  out: joint_states, ~/phase_currents, ~/q_axis_state, ~/winding_temperature, ~/housing_temperature,
+       /diagnostics, /clock (node.publish_clock)
+
+Parameters:
+"""
+
+
+def _parameter_help() -> str:
+    lines = []
+    for name, spec in list(NP.NODE_PARAMS.items()) + list(SPECS.items()):
+        unit = f" [{spec.unit}]" if spec.unit else ""
+        rt = "" if spec.runtime else " (read-only)"
+        default = list(spec.default) if isinstance(spec.default, tuple) else spec.default
+        lines.append(f"  {name} = {default!r}{unit}{rt}: {spec.description}")
+    lines.append("  preset = '' (read-only): preset name (config/*.yaml) or parameter file for the model defaults")
+    return "\n".join(lines) + "\n"
+
+
+def split_record_flag(argv: list[str]) -> tuple[list[str], str | None]:
+    """Remove ``--record PATH`` / ``--record=PATH`` (before ``--ros-args``) from ``argv``."""
+    out, record, i = [], None, 0
+    in_ros = False
+    while i < len(argv):
+        a = argv[i]
+        if a == "--ros-args":
+            in_ros = True
+        elif a == "--":
+            in_ros = False
+        if not in_ros and a == "--record":
+            if i + 1 >= len(argv):
+                raise SystemExit("actuator_node: --record needs a PATH")
+            record = argv[i + 1]
+            i += 2
+            continue
+        if not in_ros and a.startswith("--record="):
+            record = a.split("=", 1)[1]
+            i += 1
+            continue
+        out.append(a)
+        i += 1
+    return out, record
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv if argv is None else argv)
+    if any(a in ("-h", "--help") for a in argv[1:argv.index("--ros-args") if "--ros-args" in argv else None]):
+        print(USAGE + _parameter_help(), end="")
+        return 0
+    args, record = split_record_flag(argv)
+    rclpy.init(args=args)
+    node = None
+    executor = SingleThreadedExecutor()
+    try:
+        overrides = [Parameter("node.record", Parameter.Type.STRING, record)] if record else None
+        try:
+            node = ActuatorNode(parameter_overrides=overrides)
+        except (ParameterError, FileNotFoundError) as exc:
+            print(f"actuator_node: parameter error: {exc}", file=sys.stderr)
+            return 2
+        executor.add_node(node)
+        node.get_logger().info(
+            f"running: {'lock-step' if node.lock_step else 'time_factor ' + str(node.node_values['node.time_factor'])}"
+            f", publish {1e9 / node.period_ns:g} Hz, physics {node.params.drive.current_loop_rate:g} Hz")
+        executor.spin_until_future_complete(node.done)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass                    # Ctrl-C / SIGTERM: rclpy shut the context down; finish below
+    except Exception:
+        if rclpy.ok():
+            raise               # a real error (the recording is still finalized below)
+        # shut down while a callback was publishing ("publisher's context is invalid"): a normal stop
+    finally:
+        if node is not None:
+            node.close()
+            executor.remove_node(node)
+            node.destroy_node()
+        executor.shutdown()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,216 @@
+"""ROS parameters of ``actuator_node``: model parameters generated from :data:`params.SPECS` plus the
+node's own ``node.*`` parameters, with descriptors (description + unit, range, read-only).
+
+Split from :mod:`bldc_actuator.node` so that the mapping SPECS -> ROS is one small, testable job.
+Needs rclpy (rcl_interfaces); the physics modules do not.
+
+Rules
+-----
+* every parameter is declared with a default in code: the node runs without any parameter file;
+* ``preset`` (read-only string) names a preset (``ak80_9``) or a YAML path whose model values become the
+  defaults; a parameter file or ``-p`` overrides still win over the preset;
+* a ``datasheet`` block in a parameter file (``datasheet.kv``, ...) is converted to ``motor.*`` defaults
+  the same way :func:`params.params_from_dict` does (explicit ``motor.*`` values win);
+* parameters that are not ``runtime`` in SPECS are ``read_only``: ROS rejects changing them while running;
+* an integer written where a double is expected (``bus_voltage: 48``) is accepted as ``48.0``;
+* unknown parameters in the model sections or under ``node.`` are an error (typos must not pass silently).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+from rclpy.parameter import Parameter
+
+from . import params as P
+
+INF = math.inf
+
+#: parameter holding the preset name or path (read-only)
+PRESET = "preset"
+
+
+@dataclass(frozen=True)
+class NodeParam:
+    """One ``node.*`` parameter (same fields as :class:`params.ParameterSpec` where they apply)."""
+
+    name: str
+    type: type
+    default: Any
+    unit: str
+    description: str
+    range: tuple[float, float] = (-INF, INF)
+    runtime: bool = False
+    choices: tuple = ()
+
+
+#: the node's own parameters; ``runtime`` ones may change while running
+NODE_PARAMS: dict[str, NodeParam] = {p.name: p for p in (
+    NodeParam("node.publish_rate", float, 1000.0, "Hz", "rate (per second of SIMULATION time) of joint_states, "
+              "phase currents, temperatures and q-axis state; in lock-step mode the control period is "
+              "1/publish_rate", (1.0, 100000.0)),
+    NodeParam("node.time_factor", float, 1.0, "", "simulation seconds per wall second: 1 = real time, 10 = ten "
+              "times faster, 0 or .inf = as fast as possible", (0.0, INF), runtime=True),
+    NodeParam("node.lock_step", bool, False, "", "advance exactly one control period (1/publish_rate) per "
+              "received command instead of following the wall clock (controller testing)"),
+    NodeParam("node.publish_clock", bool, False, "", "publish /clock (rosgraph_msgs/Clock) with the simulation "
+              "time so that nodes with use_sim_time follow this actuator"),
+    NodeParam("node.watchdog_timeout", float, 0.5, "s", "simulation seconds without a command after which the "
+              "command drops to zero current (0 disables)", (0.0, 1e6), runtime=True),
+    NodeParam("node.joint_name", str, "joint", "", "joint name in joint_states and frame_id of the headers"),
+    NodeParam("node.commands_interface", str, "effort", "", "meaning of ~/commands (ros2_control "
+              "ForwardCommandController): effort = output torque [N*m], current = q-axis current [A]",
+              runtime=True, choices=("effort", "current")),
+    NodeParam("node.record", str, "", "", "MCAP file to record to (commands received, everything published, "
+              "parameters); empty = no recording"),
+    NodeParam("node.diagnostics_rate", float, 10.0, "Hz", "rate (per second of simulation time) of "
+              "/diagnostics", (0.01, 1000.0)),
+    NodeParam("node.max_sim_time", float, 0.0, "s", "stop (and finish the recording) after this much "
+              "simulation time; 0 = run until shut down", (0.0, 1e9)),
+)}
+
+#: overrides that are neither model nor node parameters but legitimate (ROS itself)
+_FOREIGN_OK_PREFIXES = ("use_sim_time", "qos_overrides.", "start_type_description_service")
+
+
+def _range_text(lo, hi, lo_open=False) -> str:
+    if lo == -INF and hi == INF:
+        return ""
+    left = "(" if lo_open else "["
+    return f"range {left}{lo:g}, {hi:g}]"
+
+
+def describe(spec, *, runtime: bool) -> ParameterDescriptor:
+    """Descriptor for a :class:`params.ParameterSpec` or :class:`NodeParam`: description with unit and range,
+    numeric range, ``read_only`` unless ``runtime``."""
+    unit = f" [{spec.unit}]" if spec.unit else ""
+    extras = [t for t in (_range_text(*spec.range, getattr(spec, "lo_open", False))
+                          if spec.type in (int, float) else "",
+                          f"one of: {', '.join(spec.choices)}" if spec.choices else "",
+                          "changeable at run time" if runtime else
+                          "read-only while running (set it in a parameter file or with -p)") if t]
+    d = ParameterDescriptor(description=f"{spec.description}{unit}; " + "; ".join(extras),
+                            read_only=not runtime)
+    d.type = ros_type(spec.type).value
+    lo, hi = spec.range
+    if spec.type is float and math.isfinite(lo) and math.isfinite(hi):
+        d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
+    elif spec.type is int and math.isfinite(lo) and math.isfinite(hi):
+        d.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi), step=1)]
+    if spec.choices:
+        d.additional_constraints = "one of: " + ", ".join(spec.choices)
+    return d
+
+
+def ros_type(t: type) -> Parameter.Type:
+    return {bool: Parameter.Type.BOOL, int: Parameter.Type.INTEGER, float: Parameter.Type.DOUBLE,
+            str: Parameter.Type.STRING, tuple: Parameter.Type.DOUBLE_ARRAY}[t]
+
+
+def to_ros(t: type, value: Any) -> Any:
+    """Python value of a spec -> value rclpy accepts for that type."""
+    if t is tuple:
+        return [float(v) for v in value]
+    if t is float:
+        return float(value)
+    return value
+
+
+def from_ros(t: type, value: Any) -> Any:
+    """Value read back from rclpy -> value :func:`params.from_flat` accepts."""
+    if t is tuple:
+        return tuple(float(v) for v in (value if value is not None else ()))
+    return value
+
+
+def _overrides(node) -> dict[str, Parameter]:
+    # rclpy keeps parameter-file and -p values here until they are declared (no public accessor)
+    return getattr(node, "_parameter_overrides", {}) or {}
+
+
+def _coerce_override(node, name: str, t: type) -> None:
+    """Accept an integer (or integer list) written where a double (list) is expected: 48 -> 48.0."""
+    ov = _overrides(node)
+    p = ov.get(name)
+    if p is None:
+        return
+    if t is float and p.type_ == Parameter.Type.INTEGER:
+        ov[name] = Parameter(name, Parameter.Type.DOUBLE, float(p.value))
+    elif t is tuple and p.type_ == Parameter.Type.INTEGER_ARRAY:
+        ov[name] = Parameter(name, Parameter.Type.DOUBLE_ARRAY, [float(v) for v in p.value])
+    elif t is tuple and p.type_ in (Parameter.Type.DOUBLE, Parameter.Type.INTEGER):
+        ov[name] = Parameter(name, Parameter.Type.DOUBLE_ARRAY, [float(p.value)])
+
+
+def _declare(node, name: str, t: type, default: Any, descriptor: ParameterDescriptor, unit: str) -> Any:
+    _coerce_override(node, name, t)
+    try:
+        if t is tuple and not default:
+            p = node.declare_parameter(name, Parameter.Type.DOUBLE_ARRAY, descriptor)  # empty list: type only
+        else:
+            p = node.declare_parameter(name, to_ros(t, default), descriptor)
+    except InvalidParameterTypeException as exc:
+        raise P.ParameterError(name, f"wrong type: expected {ros_type(t).name.lower()}"
+                               f"{f' [{unit}]' if unit else ''} ({exc})") from None
+    except InvalidParameterValueException:
+        given = _overrides(node).get(name)
+        shown = given.value if given is not None else default
+        lo, hi = (descriptor.floating_point_range[0].from_value, descriptor.floating_point_range[0].to_value) \
+            if descriptor.floating_point_range else (descriptor.integer_range[0].from_value,
+                                                     descriptor.integer_range[0].to_value) \
+            if descriptor.integer_range else (-INF, INF)
+        raise P.ParameterError(name, f"{shown!r} is outside [{lo:g}, {hi:g}] {unit}".rstrip()) from None
+    return from_ros(t, p.value)
+
+
+def declare_all(node) -> tuple[P.ActuatorParams, dict[str, Any], str]:
+    """Declare ``preset``, every model parameter and every ``node.*`` parameter on ``node``.
+
+    Returns ``(actuator_params, node_values, preset)``. Raises :class:`params.ParameterError` naming the
+    field for a bad value, a bad preset or an unknown parameter in a model section / under ``node.``.
+    """
+    preset = node.declare_parameter(
+        PRESET, "", ParameterDescriptor(
+            description="preset name (e.g. ak80_9; see config/) or path of a parameter file whose model "
+                        "values become the defaults; parameter-file / -p values still win; read-only",
+            read_only=True)).value
+    base = P.load_preset(preset) if preset else P.ActuatorParams()
+    defaults = P.to_flat(base)
+    datasheet = {k.split(".", 1)[1]: p.value for k, p in _overrides(node).items() if k.startswith("datasheet.")}
+    if datasheet:
+        for key, value in P.motor_from_datasheet(datasheet).items():
+            defaults[key] = value
+    flat: dict[str, Any] = {}
+    for name, spec in P.SPECS.items():
+        flat[name] = _declare(node, name, spec.type, defaults[name], describe(spec, runtime=spec.runtime),
+                              spec.unit)
+    node_values: dict[str, Any] = {}
+    for name, spec in NODE_PARAMS.items():
+        value = _declare(node, name, spec.type, spec.default, describe(spec, runtime=spec.runtime), spec.unit)
+        node_values[name] = check_node_value(name, value)
+    for name in _overrides(node):
+        if node.has_parameter(name) or name.startswith("datasheet.") or name.startswith(_FOREIGN_OK_PREFIXES):
+            continue
+        section = name.split(".", 1)[0]
+        if section in P.SECTIONS or section == "node":
+            known = sorted(P.SPECS) if section in P.SECTIONS else sorted(NODE_PARAMS)
+            raise P.ParameterError(name, "unknown parameter (known in this section: "
+                                   + ", ".join(k for k in known if k.startswith(section + ".")) + ")")
+        node.get_logger().warning(f"ignoring parameter {name!r}: not a parameter of this node")
+    return P.from_flat(flat), node_values, preset
+
+
+def check_node_value(name: str, value: Any) -> Any:
+    """Range / choice check of a ``node.*`` value (rclpy checks numeric ranges too; this gives the unit)."""
+    spec = NODE_PARAMS[name]
+    if spec.choices and value not in spec.choices:
+        raise P.ParameterError(name, f"expected one of {', '.join(spec.choices)}, got {value!r}")
+    if spec.type is float:
+        lo, hi = spec.range
+        if math.isnan(value) or not (lo <= value <= hi):
+            raise P.ParameterError(name, f"{value!r} is outside [{lo:g}, {hi:g}] {spec.unit}".rstrip())
+    return value
