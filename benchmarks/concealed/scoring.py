@@ -1,0 +1,323 @@
+"""Score a diagnosis report against the truth of a concealed-effect case; tables.
+
+Report format (issue 4): ``{"findings": [{"effect", "parameters", "uncertainty", "evidence",
+"held_out": {"metric", "before", "after"}}], "rejected", "windows", "data_issues", ...}``.
+
+Per case: hidden effects named (recall), effects named that were not hidden (false positives: on a
+null case every finding is one), relative error of each hidden effect's MAIN parameter (the first entry
+of ``truth[effect]``), held-out metric before → after of the matching finding, wall time.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+# --- parameter extraction ----------------------------------------------------------------------------
+# The diagnoser names its parameters its own way (flat model names, short names, ratios or absolute
+# values). Each extractor gets the finding's parameters and the nominal flat parameters and returns the
+# value in the truth's unit, or None. Candidates are tried in order.
+
+
+def _num(x) -> float | None:
+    if isinstance(x, dict):
+        for k in ("value", "estimate", "mean"):
+            if k in x:
+                return _num(x[k])
+        return None
+    if isinstance(x, (list, tuple)):
+        return None
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        return None
+    return v if math.isfinite(v) else None
+
+
+def _get(params: dict, *names: str) -> float | None:
+    """First parameter whose key equals one of ``names`` or ends with ``.name``."""
+    for name in names:
+        for key, val in params.items():
+            if key == name or key.endswith("." + name):
+                v = _num(val)
+                if v is not None:
+                    return v
+    return None
+
+
+def _get_list(params: dict, *names: str) -> list | None:
+    for name in names:
+        for key, val in params.items():
+            if (key == name or key.endswith("." + name)) and isinstance(val, (list, tuple)) and val:
+                return [float(v) for v in val]
+    return None
+
+
+def _ratio(params: dict, nominal: dict, ratio_names: tuple, abs_names: tuple, nominal_key: str):
+    r = _get(params, *ratio_names)
+    if r is not None:
+        return r
+    a = _get(params, *abs_names)
+    if a is not None and nominal.get(nominal_key):
+        return a / float(nominal[nominal_key])
+    return None
+
+
+def _cogging_amplitude(params: dict, nominal: dict):
+    a = _get(params, "cogging_amplitude", "amplitude", "amplitude_1")
+    if a is not None:
+        return abs(a)
+    c, s = _get_list(params, "cogging_cos"), _get_list(params, "cogging_sin")
+    if c and s:
+        return math.hypot(c[0], s[0])
+    c, s = _get(params, "cogging_cos_1", "cos_1", "a_1", "a1"), _get(params, "cogging_sin_1", "sin_1", "b_1", "b1")
+    if c is not None and s is not None:
+        return math.hypot(c, s)
+    return None
+
+
+def _ripple(params: dict, nominal: dict):
+    a = _get(params, "ripple_current_q", "current_amplitude", "amplitude_current", "offset_amplitude")
+    if a is not None:
+        return abs(a)
+    import re
+
+    for key, val in params.items():  # the pipeline's "ripple_order_<o>_amplitude" [N·m] (not the per-amp variant)
+        if re.fullmatch(r"(?:.*\.)?ripple_order_\d+_amplitude", key) and nominal.get("motor.torque_constant_q"):
+            v = _num(val)
+            if v is not None:
+                return abs(v) / float(nominal["motor.torque_constant_q"])
+    t = _get(params, "ripple_torque", "torque_amplitude", "amplitude")
+    if t is not None and nominal.get("motor.torque_constant_q"):
+        return abs(t) / float(nominal["motor.torque_constant_q"])
+    c, s = _get(params, "cos_1", "ripple_cos", "a_1"), _get(params, "sin_1", "ripple_sin", "b_1")
+    if c is not None and s is not None and nominal.get("motor.torque_constant_q"):
+        return math.hypot(c, s) / float(nominal["motor.torque_constant_q"])
+    return None
+
+
+def _voltage_ratio(params: dict, nominal: dict):
+    r = _get(params, "voltage_limit_ratio", "modulation_limit", "voltage_limit_fraction", "limit_ratio")
+    if r is not None:
+        return r
+    v = _get(params, "voltage_limit_q", "v_max", "voltage_limit")
+    if v is not None and nominal.get("drive.bus_voltage"):
+        return v / (float(nominal["drive.bus_voltage"]) / math.sqrt(2.0))
+    b = _get(params, "effective_bus_voltage", "bus_voltage")
+    if b is not None and nominal.get("drive.bus_voltage"):
+        return b / float(nominal["drive.bus_voltage"])
+    return None
+
+
+EXTRACTORS = {
+    "coulomb_friction": lambda p, n: _get(p, "coulomb_friction", "tau_c"),
+    "stribeck_friction": lambda p, n: _get(p, "stribeck_friction", "tau_s"),
+    "friction_asymmetry": lambda p, n: _get(p, "friction_asymmetry", "asymmetry", "tau_asym"),
+    "viscous_damping": lambda p, n: _get(p, "viscous_damping", "b", "viscous"),
+    "cogging_amplitude": _cogging_amplitude,
+    "ripple_current_q": _ripple,
+    "gravity_torque": lambda p, n: (abs(v) if (v := _get(p, "gravity_torque", "tau_g")) is not None else None),
+    "torque_constant_ratio": lambda p, n: _ratio(p, n, ("torque_constant_ratio", "ratio_to_nominal", "ratio",
+                                                        "k_t_ratio"),
+                                                 ("torque_constant_q", "K_t_q"), "motor.torque_constant_q"),
+    "inertia_ratio": lambda p, n: _ratio(p, n, ("inertia_ratio", "ratio_to_nominal"), ("rotor_inertia", "J"),
+                                         "motor.rotor_inertia"),
+    "copper_temperature_coefficient": lambda p, n: _get(p, "copper_temperature_coefficient", "alpha"),
+    "magnet_temperature_coefficient": lambda p, n: _get(p, "magnet_temperature_coefficient", "beta"),
+    "voltage_limit_ratio": _voltage_ratio,
+}
+
+
+# --- scores --------------------------------------------------------------------------------------------
+
+@dataclass
+class EffectScore:
+    effect: str
+    found: bool
+    parameter: str
+    true_value: float
+    estimate: float | None = None
+    rel_error: float | None = None
+    held_out_metric: str | None = None
+    held_out_before: float | None = None
+    held_out_after: float | None = None
+
+
+@dataclass
+class CaseScore:
+    case: str
+    hidden: list[str]
+    found: list[str]
+    missed: list[str]
+    false_positives: list[str]
+    effects: list[EffectScore] = field(default_factory=list)
+    snr: float | None = None
+    channel: str | None = None
+    wall_time_s: float | None = None
+    error: str | None = None
+    false_positive_detail: list[dict] = field(default_factory=list)
+
+    @property
+    def is_null(self) -> bool:
+        return not self.hidden
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None and not self.missed and not self.false_positives
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["ok"] = self.ok
+        return d
+
+
+def score_case(truth: dict, report: dict | None, nominal_flat: dict, *, wall_time: float | None = None,
+               error: str | None = None) -> CaseScore:
+    hidden = list(truth["effects"])
+    conc = truth.get("concealment", {})
+    if report is None:
+        return CaseScore(truth["case"], hidden, [], hidden, [], snr=conc.get("snr"), channel=conc.get("channel"),
+                         wall_time_s=wall_time, error=error or "no report")
+    findings = [f for f in report.get("findings", []) if isinstance(f, dict) and f.get("effect")]
+    names = []
+    for f in findings:
+        if f["effect"] not in names:
+            names.append(f["effect"])
+    missed = [e for e in hidden if e not in names]
+    fps = [e for e in names if e not in hidden]
+    cs = CaseScore(truth["case"], hidden, names, missed, fps, snr=conc.get("snr"), channel=conc.get("channel"),
+                   wall_time_s=wall_time, error=error)
+    for f in findings:
+        if f["effect"] in fps:
+            cs.false_positive_detail.append({k: f.get(k) for k in ("effect", "parameters", "evidence", "held_out")})
+    for effect in hidden:
+        params_true = truth["truth"][effect]
+        main, true_value = next(iter(params_true.items()))
+        es = EffectScore(effect, effect in names, main, float(true_value))
+        f = next((f for f in findings if f["effect"] == effect), None)
+        if f is not None:
+            est = EXTRACTORS.get(main, lambda p, n: _get(p, main))(f.get("parameters") or {}, nominal_flat)
+            if est is not None:
+                es.estimate = est
+                es.rel_error = abs(est - es.true_value) / abs(es.true_value)
+            ho = f.get("held_out") or {}
+            es.held_out_metric = ho.get("metric")
+            es.held_out_before, es.held_out_after = _num(ho.get("before")), _num(ho.get("after"))
+        cs.effects.append(es)
+    return cs
+
+
+def summarise(scores: list[CaseScore]) -> dict:
+    effect_cases = [s for s in scores if not s.is_null]
+    nulls = [s for s in scores if s.is_null]
+    n_hidden = sum(len(s.hidden) for s in effect_cases)
+    n_found = sum(len(s.hidden) - len(s.missed) for s in effect_cases)
+    errs = [e.rel_error for s in effect_cases for e in s.effects if e.found and e.rel_error is not None]
+    improvements = [1.0 - e.held_out_after / e.held_out_before for s in effect_cases for e in s.effects
+                    if e.found and e.held_out_before and e.held_out_after is not None and e.held_out_before > 0]
+    times = [s.wall_time_s for s in scores if s.wall_time_s is not None]
+    return {
+        "cases": len(scores),
+        "effect_cases": len(effect_cases),
+        "null_cases": len(nulls),
+        "hidden_effects": n_hidden,
+        "detected": n_found,
+        "detection_rate": n_found / n_hidden if n_hidden else None,
+        "cases_fully_correct": sum(s.ok for s in scores),
+        "false_positives_on_nulls": sum(len(s.false_positives) for s in nulls),
+        "extra_effects_on_effect_cases": sum(len(s.false_positives) for s in effect_cases),
+        "parameters_scored": len(errs),
+        "mean_parameter_error": sum(errs) / len(errs) if errs else None,
+        "median_parameter_error": sorted(errs)[len(errs) // 2] if errs else None,
+        "mean_held_out_improvement": sum(improvements) / len(improvements) if improvements else None,
+        "errors": sum(s.error is not None for s in scores),
+        "mean_wall_time_s": sum(times) / len(times) if times else None,
+        "max_wall_time_s": max(times) if times else None,
+    }
+
+
+# --- tables --------------------------------------------------------------------------------------------
+
+def _fmt(x, spec=".3g", none="–"):
+    if x is None:
+        return none
+    return format(x, spec)
+
+
+def rows(scores: list[CaseScore], truths: dict[str, dict]) -> list[list[str]]:
+    out = []
+    for s in scores:
+        t = truths[s.case]
+        conc = t.get("concealment", {})
+        snr = "null" if s.is_null else f"{conc.get('effect_rms', 0):.3g}/{conc.get('noise_rms', 0):.2g} " \
+                                        f"{'A' if conc.get('channel') == 'current' else 'V'} = {conc.get('snr', 0):.2f}"
+        if s.error:
+            verdict = "ERROR"
+        elif s.is_null:
+            verdict = "ok" if not s.false_positives else "FALSE POSITIVE"
+        else:
+            verdict = "ok" if s.ok else ("missed" if s.missed and not s.false_positives else
+                                        "extra" if not s.missed else "missed+extra")
+        params, errs, held = [], [], []
+        for e in s.effects:
+            params.append(f"{_fmt(e.true_value)}→{_fmt(e.estimate)}")
+            errs.append(_fmt(None if e.rel_error is None else 100 * e.rel_error, ".0f") + ("%" if e.rel_error is not None else ""))
+            held.append(f"{_fmt(e.held_out_before)}→{_fmt(e.held_out_after)}" if e.found else "–")
+        out.append([
+            s.case,
+            ", ".join(s.hidden) or "(none)",
+            snr,
+            ", ".join(s.found) or "(nothing)",
+            verdict + (f" (+{', '.join(s.false_positives)})" if s.false_positives else ""),
+            "; ".join(params) or "–",
+            "; ".join(errs) or "–",
+            "; ".join(held) or "–",
+            _fmt(s.wall_time_s, ".1f"),
+        ])
+    return out
+
+
+HEADER = ["case", "hidden effect(s)", "effect/noise RMS (channel) = SNR", "named by diagnose", "verdict",
+          "main parameter true→est", "rel. error", "held-out before→after", "time [s]"]
+
+
+def text_table(scores, truths) -> str:
+    data = [HEADER] + rows(scores, truths)
+    widths = [max(len(r[i]) for r in data) for i in range(len(HEADER))]
+    lines = []
+    for k, r in enumerate(data):
+        lines.append("  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip())
+        if k == 0:
+            lines.append("  ".join("-" * w for w in widths))
+    return "\n".join(lines)
+
+
+def markdown_table(scores, truths) -> str:
+    data = rows(scores, truths)
+    lines = ["| " + " | ".join(HEADER) + " |", "|" + "|".join("---" for _ in HEADER) + "|"]
+    for r in data:
+        lines.append("| " + " | ".join(c.replace("|", "\\|") for c in r) + " |")
+    return "\n".join(lines)
+
+
+def summary_text(summary: dict) -> str:
+    def pct(x):
+        return "–" if x is None else f"{100 * x:.0f} %"
+
+    return (f"detection: {summary['detected']}/{summary['hidden_effects']} hidden effects named "
+            f"({pct(summary['detection_rate'])}); cases fully correct: {summary['cases_fully_correct']}/"
+            f"{summary['cases']}\n"
+            f"false positives on the {summary['null_cases']} null cases: {summary['false_positives_on_nulls']}; "
+            f"extra effects named on effect cases: {summary['extra_effects_on_effect_cases']}\n"
+            f"main-parameter error: mean {pct(summary['mean_parameter_error'])}, median "
+            f"{pct(summary['median_parameter_error'])} over {summary['parameters_scored']} scored parameters; "
+            f"mean held-out improvement of the named hidden effects: {pct(summary['mean_held_out_improvement'])}\n"
+            f"wall time per case: mean {_fmt(summary['mean_wall_time_s'], '.1f')} s, max "
+            f"{_fmt(summary['max_wall_time_s'], '.1f')} s; errors: {summary['errors']}")
+
+
+def load_json(path) -> Any:
+    with open(path) as fh:
+        return json.load(fh)
