@@ -5,7 +5,8 @@ It deliberately does **not** use any conversion formula of :mod:`bldc_actuator.f
 from Kirchhoff's laws on the winding network, the inductance matrix and the magnet flux linkage.
 
 Windings (k = 0, 1, 2 = a, b, c), per winding
-    :math:`v_k = R\,i_k + \tfrac{d\psi_k}{dt}`, :math:`\boldsymbol\psi = \mathbf{L}\,\mathbf{i} + \boldsymbol\psi_{PM}(\theta_e)`,
+    :math:`v_k = R\,i_k + \tfrac{d\psi_k}{dt}`,
+    :math:`\boldsymbol\psi = \mathbf{L}\,\mathbf{i} + \boldsymbol\psi_{PM}(\theta_e)`,
     :math:`\mathbf{L} = \begin{bmatrix}L_s&M&M\\M&L_s&M\\M&M&L_s\end{bmatrix}`,
     :math:`\psi_{PM,k} = \tfrac{\bar{K}_b^\phi}{p}\cos(\theta_e - k\,2\pi/3)`,
 so the back-EMF is :math:`e_k = -\bar{K}_b^\phi\,\omega_r\sin(\theta_e - k\,2\pi/3)` (paper eqs. for
@@ -138,8 +139,9 @@ class AbcMotor:
         return (self.k_b_phase / self.pole_pairs) * np.cos(th[None, ...] - _SHIFT.reshape((3,) + (1,) * th.ndim))
 
     def torque_coefficients(self, theta_e) -> np.ndarray:
-        r""":math:`\partial\psi_{PM,k}/\partial\theta_r = -\bar{K}_b^\phi\sin(\theta_e - k\,2\pi/3)` (N·m/A = V·s/rad),
-        the paper's :math:`K^\phi_{t,k}(\theta)`; shape (3, ...)."""
+        r"""Torque per winding ampere (N·m/A = V·s/rad), shape (3, ...):
+        :math:`\partial\psi_{PM,k}/\partial\theta_r = -\bar{K}_b^\phi\sin(\theta_e - k\,2\pi/3)`, the paper's
+        :math:`K^\phi_{t,k}(\theta)`."""
         th = np.asarray(theta_e, dtype=float)
         return -self.k_b_phase * np.sin(th[None, ...] - _SHIFT.reshape((3,) + (1,) * th.ndim))
 
@@ -339,6 +341,8 @@ def simulate(motor: AbcMotor, drive: Drive, t_eval: np.ndarray, *, omega: float 
     x0 : ndarray, optional
         Initial independent (mesh) currents; default zero (the winding currents start at the particular
         solution of the imposed line currents, i.e. zero for a voltage drive).
+    method, rtol, atol, max_step
+        Passed to :func:`scipy.integrate.solve_ivp`.
 
     Returns
     -------
@@ -430,7 +434,8 @@ def steady_state_winding_currents(motor: AbcMotor, i_phase_peak: float, theta_e,
 
     :math:`i_k = -\bar{I}^\phi\sin(\theta_e - k\,2\pi/3 + \gamma)` (γ = ``phase_offset``; 0 = in phase with the
     back-EMF), at constant speed ``omega_r`` (mechanical rad/s). Winding voltages from KVL,
-    :math:`\mathbf{v} = R\mathbf{i} + \mathbf{L}\,d\mathbf{i}/dt + \mathbf{e}` with :math:`d/dt = p\,\omega_r\,d/d\theta_e`;
+    :math:`\mathbf{v} = R\mathbf{i} + \mathbf{L}\,d\mathbf{i}/dt + \mathbf{e}` with
+    :math:`d/dt = p\,\omega_r\,d/d\theta_e`;
     lead potentials from :math:`\mathbf{A}^T\mathbf{u} = \mathbf{v}` (zero mean over the leads). For delta
     this requires no circulating current, which is the steady state of the loop for a balanced motor.
     """
@@ -444,7 +449,8 @@ def steady_state_winding_currents(motor: AbcMotor, i_phase_peak: float, theta_e,
 
 def steady_state_line_currents(motor: AbcMotor, i_line_peak: float, theta_e, omega_r: float,
                                phase_offset: float = 0.0) -> AbcResult:
-    r"""Sinusoidal steady state with imposed line currents :math:`i_{k}^{l} = -\bar{I}^l\sin(\theta_e - k\,2\pi/3 + \gamma)`.
+    r"""Sinusoidal steady state with imposed line currents
+    :math:`i_{k}^{l} = -\bar{I}^l\sin(\theta_e - k\,2\pi/3 + \gamma)`.
 
     Winding currents from KCL (``A i = j``); the delta circulating current is zero in steady state
     (its loop equation :math:`3(L_s + 2M)\,di_0/dt + 3R\,i_0 = -\sum_k e_k = 0` decays). A drive that does not
@@ -536,10 +542,18 @@ def measure_terminal_inductance_step(motor: AbcMotor, leads: tuple[int, int] = (
     return r_ll, -r_ll / slope
 
 
-def measure_back_emf_ll(motor: AbcMotor, omega_r: float = 100.0, samples: int = 256) -> tuple[float, AbcResult]:
+def measure_back_emf_ll(motor: AbcMotor, omega_r: float | None = None,
+                        samples: int = 256) -> tuple[float, AbcResult]:
     r"""Open-circuit test: spin at ``omega_r`` (mechanical rad/s), all leads open, record :math:`v_{AB}` over one
     electrical period (simulated: the delta loop current is a state) and return the fundamental amplitude
-    per rad/s, :math:`\bar{K}_b^{ll}` (V·s/rad), and the record."""
+    per rad/s, :math:`\bar{K}_b^{ll}` (V·s/rad), and the record.
+
+    ``omega_r=None`` picks a speed whose electrical period is 20 time constants of the delta loop
+    (:math:`(L_s + 2M)/R`), which keeps the explicit integrator short; the result does not depend on speed.
+    """
+    if omega_r is None:
+        tau0 = (motor.l_self + 2.0 * motor.l_mutual) / motor.r_phase
+        omega_r = 2.0 * math.pi / (20.0 * tau0) / motor.pole_pairs
     w_e = motor.pole_pairs * omega_r
     period = 2.0 * math.pi / w_e
     t = np.linspace(0.0, period, samples, endpoint=False)
@@ -549,7 +563,7 @@ def measure_back_emf_ll(motor: AbcMotor, omega_r: float = 100.0, samples: int = 
     return amp / omega_r, res
 
 
-def measure_kv(motor: AbcMotor, omega_r: float = 100.0) -> float:
+def measure_kv(motor: AbcMotor, omega_r: float | None = None) -> float:
     """Kv (rpm/V) as no-load rpm per volt of line-to-line PEAK back-EMF, from :func:`measure_back_emf_ll`."""
     k_ll, _ = measure_back_emf_ll(motor, omega_r)
     return 60.0 / (2.0 * math.pi * k_ll)

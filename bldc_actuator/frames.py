@@ -234,7 +234,8 @@ def park(alpha, beta, theta_e):
 
 
 def inverse_park(d, q, theta_e):
-    r"""Inverse of :func:`park`: :math:`\alpha = d\cos\theta - q\sin\theta`, :math:`\beta = d\sin\theta + q\cos\theta`."""
+    r"""Inverse of :func:`park`: :math:`\alpha = d\cos\theta - q\sin\theta`,
+    :math:`\beta = d\sin\theta + q\cos\theta`."""
     c, s = np.cos(theta_e), np.sin(theta_e)
     return d * c - q * s, d * s + q * c
 
@@ -449,9 +450,11 @@ def _voltage_factor(frame: str, winding: str) -> tuple[float, str, str]:
     table = {
         "phase_peak": (SQRT3_2, "V^q = sqrt(3/2) * V^phi_peak", "eq. dq_trans applied to a balanced set"),
         "phase_rms": (SQRT3, "V^q = sqrt(3) * V^phi_rms", "eq. dq_trans with V_peak = sqrt(2) V_rms"),
-        "ll_peak": ((1.0 / SQRT2, "V^q = V^ll_peak / sqrt(2)", "tab:q-conversion rows V^q, K_t^q; eqs. voltage_wye, Kt_conversion_wye")
+        "ll_peak": ((1.0 / SQRT2, "V^q = V^ll_peak / sqrt(2)",
+                     "tab:q-conversion rows V^q, K_t^q; eqs. voltage_wye, Kt_conversion_wye")
                     if w == "wye" else
-                    (SQRT3_2, "V^q = sqrt(3/2) * V^ll_peak", "tab:q-conversion rows V^q, K_t^q; eqs. voltage_delta, Kt_conversion_delta")),
+                    (SQRT3_2, "V^q = sqrt(3/2) * V^ll_peak",
+                     "tab:q-conversion rows V^q, K_t^q; eqs. voltage_delta, Kt_conversion_delta")),
         "ll_rms": ((1.0, "V^q = V^ll_rms", "eq. voltage_wye with V_peak = sqrt(2) V_rms") if w == "wye" else
                    (SQRT3, "V^q = sqrt(3) * V^ll_rms", "eq. voltage_delta with V_peak = sqrt(2) V_rms")),
         "q_power_invariant": (1.0, "V^q = V^q", "definition"),
@@ -536,7 +539,9 @@ def phase_resistance_from_terminal(r_terminal, winding: Winding):
 
 
 def terminal_resistance_from_phase(r_phase, winding: Winding):
-    r""":math:`R^{ll} = 2R^\phi` (wye) or :math:`\tfrac23 R^\phi` (delta); inverse of :func:`phase_resistance_from_terminal`."""
+    r""":math:`R^{ll} = 2R^\phi` (wye) or :math:`\tfrac23 R^\phi` (delta).
+
+    Inverse of :func:`phase_resistance_from_terminal`."""
     return r_phase * (2.0 if _winding(winding) == "wye" else 2.0 / 3.0)
 
 
