@@ -242,7 +242,7 @@ CASES: tuple[Case, ...] = (
     Case("kt_frame", ("torque_constant_error",),
          "torque constant taken in the wrong frame: true K_t = nominal x sqrt(3/2)",
          {"torque_constant_error": {"torque_constant_ratio": SQRT3_2}},
-         plant={"K": 0.0743 * SQRT3_2}, channel="voltage_q", seed=8, quick=True),
+         plant={"K": 0.0743 * SQRT3_2}, channel="voltage_q", seed=8),
     Case("inertia", ("inertia_error",), "the link's inertia was forgotten: true J = 1.4 x nominal",
          {"inertia_error": {"inertia_ratio": 1.4}},
          plant={"J": 1.4 * 6.0e-5}, train=Excitation("multisine", 40.0, 9, {"span": 0.3, "f_hi": 4.0}),
