@@ -193,8 +193,11 @@ def thermal_matrix(th):
 def test_thermal_transient_and_steady_state():
     """Locked rotor at constant current: temperatures follow the analytic two-node solution
     (independent scipy expm) and settle at T_a + P (R_wh + R_ha), T_a + P R_ha."""
-    p = make(**ISOTHERMAL, **{"motor.rotor_inertia": 100.0, "motor.viscous_damping": 100.0, "thermal.winding_heat_capacity": 2.0,
-                              "thermal.housing_heat_capacity": 10.0, "drive.current_limit": 30.0,
+    # a 1 kHz current loop is plenty for a locked rotor at constant current and keeps the test fast
+    p = make(**ISOTHERMAL, **{"motor.rotor_inertia": 100.0, "motor.viscous_damping": 100.0,
+                              "thermal.winding_heat_capacity": 0.5, "thermal.housing_heat_capacity": 2.0,
+                              "drive.current_loop_rate": 1000.0, "drive.current_loop_bandwidth": 100.0,
+                              "drive.current_limit": 30.0,
                               "thermal.ambient_temperature": 20.0, "thermal.initial_winding_temperature": 20.0,
                               "thermal.initial_housing_temperature": 20.0})
     th = p.thermal
@@ -205,7 +208,7 @@ def test_thermal_transient_and_steady_state():
     act = Actuator(p)
     act.set_current_command(i)
     act.step(0.05)          # current settles in < 1 ms; Joule power is P from then on
-    for t_end in (5.0, 20.0):
+    for t_end in (1.0, 4.0):
         act.step(t_end - act.t)
         # analytic from t=0 with constant P (the 1 ms current rise changes it by < 1e-3 K)
         y = np.linalg.solve(A, (expm(A * t_end) - np.eye(2)) @ g) * P
@@ -221,8 +224,9 @@ def test_thermal_transient_and_steady_state():
 
 def test_resistance_rises_with_temperature_self_consistently():
     """With R(T) on, the steady winding rise solves ΔT = R_th R0 i² (1 + α (T - T0))."""
-    p = make(**{"motor.rotor_inertia": 100.0, "motor.viscous_damping": 100.0, "thermal.winding_heat_capacity": 1.0,
-                "thermal.housing_heat_capacity": 5.0, "drive.current_limit": 30.0})
+    p = make(**{"motor.rotor_inertia": 100.0, "motor.viscous_damping": 100.0, "thermal.winding_heat_capacity": 0.2,
+                "thermal.housing_heat_capacity": 1.0, "drive.current_limit": 30.0,
+                "drive.current_loop_rate": 1000.0, "drive.current_loop_bandwidth": 100.0})
     m, th = p.motor, p.thermal
     i = 8.0
     Rth = th.winding_to_housing_resistance + th.housing_to_ambient_resistance
@@ -231,7 +235,7 @@ def test_resistance_rises_with_temperature_self_consistently():
     dT = k * (1 + a * (th.ambient_temperature - m.reference_temperature)) / (1 - a * k)
     act = Actuator(p)
     act.set_current_command(i)
-    act.step(200.0)
+    act.step(40.0)
     assert act.state.T_winding - th.ambient_temperature == pytest.approx(dT, rel=1e-4)
     assert act.outputs()["resistance_phase"] == pytest.approx(
         m.phase_resistance * (1 + a * (act.state.T_winding - m.reference_temperature)), rel=1e-12)
