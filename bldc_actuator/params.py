@@ -449,10 +449,15 @@ def dump_yaml(params: ActuatorParams, path: str | Path | None = None, *, header:
 
 def config_dir() -> Path:
     """Directory holding the preset YAML files (source tree, pip install or colcon install)."""
-    here = Path(__file__).resolve().parent
-    candidates = [here / "config", here.parent / "config"]
     import sys
 
+    here = Path(__file__).resolve().parent
+    candidates = []
+    if (here.parent / "package.xml").exists():          # source checkout / editable install
+        candidates.append(here.parent / "config")
+    # pip install or colcon install: <prefix>/lib/pythonX.Y/site-packages/bldc_actuator → <prefix>/share
+    if len(here.parents) > 3:
+        candidates.append(here.parents[3] / "share" / "bldc_actuator" / "config")
     candidates.append(Path(sys.prefix) / "share" / "bldc_actuator" / "config")
     try:  # colcon / apt install
         from ament_index_python.packages import get_package_share_directory
