@@ -72,6 +72,8 @@ def _value(key: str, value: Any) -> str:
     unit = f" {spec.unit}" if spec is not None and spec.unit else ""
     if isinstance(value, float):
         return f"{value:.6g}{unit}"
+    if value == "" or value is None:
+        return "(not set)"
     return f"{value}{unit}"
 
 
