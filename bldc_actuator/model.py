@@ -108,6 +108,8 @@ class _Coeffs:
         self.T_ref = m("reference_temperature")
         self.alpha = m("copper_temperature_coefficient") * m("resistance_temperature_enabled")
         self.beta = m("magnet_temperature_coefficient") * m("magnet_temperature_enabled")
+        self.has_alpha = bool(np.any(self.alpha))
+        self.has_beta = bool(np.any(self.beta))
         self.N = col(lambda p: p.gear.gear_ratio)
         d = lambda name: col(lambda p: getattr(p.drive, name))  # noqa: E731
         self.V_bus = d("bus_voltage")
@@ -282,8 +284,8 @@ def _advance(c: _Coeffs, s: _S, h_ns: int, ops) -> None:
     """Advance the plant by ``h_ns`` with the held voltage ``s.v``."""
     h = h_ns * 1e-9
     i0, w0, th0, v = s.i, s.omega, s.theta, s.v
-    R = effects.resistance_at(c.R_ref, s.T_w, c.T_ref, c.alpha)
-    K = c.K_ref * effects.flux_factor(s.T_h, c.T_ref, c.beta)   # magnet at housing temperature
+    R = effects.resistance_at(c.R_ref, s.T_w, c.T_ref, c.alpha) if c.has_alpha else c.R_ref
+    K = c.K_ref * effects.flux_factor(s.T_h, c.T_ref, c.beta) if c.has_beta else c.K_ref  # magnet at T_housing
     L, J = c.L, c.J
     # electrical: L di/dt = v - (R + j p w0 L) i - j K ω(t), with the speed ramping linearly over the
     # interval, ω(t) = w0 + r t, r = 2 (w - w0)/h (w = mean speed, found below). Exact solution:
@@ -337,7 +339,7 @@ def _advance(c: _Coeffs, s: _S, h_ns: int, ops) -> None:
     conv_mech = K * i_mean.imag * w * h                                        # work of the mean torque
     dth = w * h
     # thermal: exact for the interval-mean Joule power
-    p11, p12, p21, p22, G1, G2, i21, i22, g1 = c.thermal(h_ns)
+    p11, p12, p21, p22, G1, G2, i21, i22, g1 = c._thermal_cache.get(h_ns) or c.thermal(h_ns)
     P = joule / h
     y1, y2 = s.T_w - c.T_amb, s.T_h - c.T_amb
     n1 = p11 * y1 + p12 * y2 + G1 * P
