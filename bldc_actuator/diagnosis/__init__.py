@@ -1,0 +1,10 @@
+"""``bldc-actuator diagnose``: hold the simulation against real recordings, locate where they differ,
+name the missing physics, model it and show the fit improve (issue 4).
+
+Data layer: :mod:`.signals` (Signals, DataIssue, CANONICAL), :mod:`.loaders` (CSV, MCAP, Mapping),
+:mod:`.cleaning` (detect and report dirty data), :mod:`.realdata` (adapters for ../shared/data).
+"""
+
+from .signals import CANONICAL, DataIssue, Signals
+
+__all__ = ["CANONICAL", "DataIssue", "Signals"]
