@@ -1,0 +1,742 @@
+"""The library of named candidate effects: each a small group of regressor columns built from the shared
+effect terms (:mod:`bldc_actuator.effects`), with the channels it needs, an excitation check, how its
+fitted coefficients map onto the parameter file, and what it is confusable with.
+
+A column is ``key -> {equation: raw-rate array}``; its coefficient is the *change* of a parameter
+(the equation-error residual of :mod:`.equation_error` is ``Σ column · Δparameter``). Sign conventions::
+
+    mechanical r_m = K i_q - J ω' - b ω - τ_f - τ_cog - τ_ext/N    (true - nominal opposing torques)
+    electrical r_e = v_q - R i_q - L i_q' - K ω - p ω L i_d
+
+Variants: a candidate may offer several forms (cogging order, Stribeck velocity, which equations a
+torque-constant error enters...); selection tries each and keeps the best.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from .. import effects
+
+#: frame factors a torque-constant error is compared with (fitted K / nominal K)
+FRAME_FACTORS = {
+    "sqrt(3/2)": math.sqrt(1.5), "sqrt(2/3)": math.sqrt(2 / 3), "sqrt(2)": math.sqrt(2), "1/sqrt(2)": 1 / math.sqrt(2),
+    "sqrt(3)": math.sqrt(3), "1/sqrt(3)": 1 / math.sqrt(3), "3/2": 1.5, "2/3": 2 / 3, "2/sqrt(3)": 2 / math.sqrt(3),
+    "sqrt(3)/2": math.sqrt(3) / 2, "2": 2.0, "1/2": 0.5, "3": 3.0, "1/3": 1 / 3,
+}
+
+
+def match_frame_factor(ratio: float, sigma: float) -> str:
+    """Name of the frame factor within max(2 %, 2σ) of ``ratio``, else ``"none"``."""
+    best, best_err = "none", float("inf")
+    for name, f in FRAME_FACTORS.items():
+        err = abs(ratio - f)
+        if err <= max(0.02 * f, 2.0 * sigma) and err < best_err:
+            best, best_err = name, err
+    return best
+
+
+@dataclass
+class Variant:
+    """One concrete form of a candidate: its column keys, builders and fixed hyper-parameters."""
+
+    effect: str
+    label: str
+    columns: dict[str, Callable]                  #: key -> builder(ctx) -> {eq: raw array}
+    hyper: dict[str, Any] = field(default_factory=dict)
+    #: continuous hyper-parameter refined in the final fit: name -> (value, lo, hi, rebuild(ctx, value) -> columns)
+    nonlinear: dict[str, tuple] = field(default_factory=dict)
+    additive: bool = False                        #: other variants of the same effect may join later
+
+    @property
+    def keys(self) -> list[str]:
+        return list(self.columns)
+
+
+@dataclass
+class Candidate:
+    name: str
+    equations: tuple[str, ...]
+    needs: tuple[str, ...]                        #: channels ("a|b" = either)
+    description: str                              #: plain words: what physics this is
+    simulated: bool                               #: has parameters in the schema
+    confusable: dict[str, str] = field(default_factory=dict)   #: other effect -> experiment separating them
+    variants: Callable = None                     #: (ctx, locate) -> list[Variant]
+    excited: Callable = None                      #: (ctx) -> None | reason it is not identifiable here
+    to_params: Callable = None                    #: (coef, cov, keys, variant, ctx) -> Finding parameters
+
+
+def _smooth_sign(x, eps):
+    return np.tanh(x / eps) if eps > 0 else np.sign(x)
+
+
+# ---------------------------------------------------------------------------------------- builders
+
+def _mech(f):
+    return lambda ctx: {"mechanical": f(ctx)}
+
+
+def _elec(f):
+    return lambda ctx: {"electrical": f(ctx)}
+
+
+def _fric_cols(ctx, omega_s):
+    return effects.friction_basis(ctx.sig["omega_s"], omega_s, ctx.omega_eps)
+
+
+def col_fric_sign(ctx):
+    return {"mechanical": _fric_cols(ctx, 1.0)[:, 0]}
+
+
+def col_fric_abs(ctx):
+    return {"mechanical": _fric_cols(ctx, 1.0)[:, 1]}
+
+
+def col_stribeck(omega_s):
+    return lambda ctx: {"mechanical": _fric_cols(ctx, omega_s)[:, 2]}
+
+
+def col_viscous(ctx):
+    return {"mechanical": effects.viscous_basis(ctx.sig["omega"])[:, 0]}
+
+
+def resolvable(ctx, order) -> np.ndarray:
+    """Weight in [0, 1]: 1 where an angle harmonic of ``order`` (cycles per revolution) at the current speed
+    lies well inside the low-pass (f < fc/2), falling smoothly to 0 at f = fc. Above that the measured
+    signals cannot show it (and the raw-rate regressor would alias), so the column is switched off there."""
+    f = np.abs(ctx.sig["omega_s"]) * order / (2 * math.pi)
+    fc = ctx.dec.fc
+    x = np.clip((f - 0.5 * fc) / (0.5 * fc), 0.0, 1.0)
+    return 0.5 * (1.0 + np.cos(math.pi * x))
+
+
+def col_harmonic(order, k, which, current_weighted=False):
+    def build(ctx):
+        b = effects.angle_harmonic_basis(ctx.sig["theta"], order, k)[:, 2 * (k - 1) + (0 if which == "cos" else 1)]
+        b = b * resolvable(ctx, k * order)
+        if current_weighted:
+            b = b * ctx.sig["i_q"]
+        return {"mechanical": b}
+    return build
+
+
+def col_load(kind):
+    def build(ctx):
+        N = ctx.params.gear.gear_ratio
+        th_out = ctx.sig["theta"] / N
+        f = {"sin": np.sin(th_out), "cos": np.cos(th_out), "lin": th_out, "const": np.ones_like(th_out)}[kind]
+        return {"mechanical": f / N}
+    return build
+
+
+def col_kt(equations):
+    def build(ctx):
+        S = ctx.sig
+        out = {}
+        if "mechanical" in equations:
+            out["mechanical"] = -S["K"] * S["i_q"]
+        if "electrical" in equations and "v_q" in S:
+            out["electrical"] = S["K"] * S["omega"]
+        return out
+    return build
+
+
+def col_inertia(ctx):
+    return {"mechanical": ctx.sig["omega_dot"]}
+
+
+def col_r_err(ctx):
+    m = ctx.params.motor
+    S = ctx.sig
+    return {"electrical": S["i_q"] * S["R"] / m.phase_resistance}
+
+
+def col_l_err(ctx):
+    return {"electrical": ctx.sig["di_dt"]}
+
+
+def col_r_temp(ctx):
+    m = ctx.params.motor
+    S = ctx.sig
+    return {"electrical": m.phase_resistance * (S["T_w"] - m.reference_temperature) * S["i_q"]}
+
+
+def col_magnet(ctx):
+    m = ctx.params.motor
+    S = ctx.sig
+    dT = S["T_h"] - m.reference_temperature
+    out = {"mechanical": -m.torque_constant_q * dT * S["i_q"]}
+    if "v_q" in S:
+        out["electrical"] = m.torque_constant_q * dT * S["omega"]
+    return out
+
+
+def col_saturation(ctx):
+    S = ctx.sig
+    return {"mechanical": S["K"] * S["i_q"] * np.abs(S["i_q"])}
+
+
+def col_dead_time(ctx):
+    S = ctx.sig
+    i = S["i_q"]
+    eps = max(3.0 * float(np.std(i - ctx.dec.lowpass(i))), 1e-3 * float(np.percentile(np.abs(i), 90)), 1e-6)
+    return {"electrical": _smooth_sign(ctx.dec.lowpass(i), eps)}
+
+
+def col_delay(ctx):
+    return {"electrical": ctx.sig["dv_dt"]}
+
+
+def col_vsat(limit_fraction):
+    def build(ctx):
+        S = ctx.sig
+        h = S["headroom"]
+        excess = np.clip(1.0 - limit_fraction / np.maximum(h, 1e-9), 0.0, None)
+        return {"electrical": S["v_q"] * excess}
+    return build
+
+
+# ------------------------------------------------------------------------------------ excitation
+
+def _frac(x):
+    return float(np.mean(x)) if np.size(x) else 0.0
+
+
+def excite_friction(ctx):
+    w = ctx.dsig("omega_s")
+    m = np.abs(w) > 2 * ctx.omega_eps
+    pos, neg = _frac((w > 0) & m), _frac((w < 0) & m)
+    if min(pos, neg) < 0.03:
+        return (f"needs motion in both directions (moving ω>0 {100 * pos:.0f}%, ω<0 {100 * neg:.0f}% of samples)")
+    return None
+
+
+def excite_one_direction(ctx):
+    w = ctx.dsig("omega_s")
+    return None if _frac(np.abs(w) > 2 * ctx.omega_eps) > 0.05 else "needs the rotor to move (it is at rest)"
+
+
+def excite_stribeck(ctx):
+    r = excite_friction(ctx)
+    if r:
+        return r
+    w = np.abs(ctx.dsig("omega_s"))
+    slow = (w > 2 * ctx.omega_eps) & (w < 0.1 * np.percentile(w, 95))
+    return None if _frac(slow) > 0.02 else "needs slow motion (few samples at low non-zero speed)"
+
+
+def excite_viscous(ctx):
+    w = np.abs(ctx.dsig("omega_s"))
+    return None if np.percentile(w, 95) > 20 * ctx.omega_eps else "needs a range of speeds"
+
+
+def excite_angle(order):
+    def check(ctx):
+        if float(ctx.sig["theta_known"]) <= 0:
+            return "needs the rotor angle (position channel)"
+        th = ctx.dsig("theta")
+        span = float(np.nanmax(th) - np.nanmin(th)) * order / (2 * math.pi)
+        return None if span >= 2.0 else f"needs the rotor to sweep at least two periods of order {order}"
+    return check
+
+
+def excite_load(ctx):
+    if float(ctx.sig["theta_known"]) <= 0:
+        return "needs the rotor angle (position channel)"
+    N = ctx.params.gear.gear_ratio
+    th = ctx.dsig("theta") / N
+    span = float(np.nanmax(th) - np.nanmin(th))
+    return None if span >= 0.5 else f"needs output motion over a larger angle (swept {span:.2f} rad)"
+
+
+def excite_inertia(ctx):
+    a = ctx.dsig("omega_dot")
+    return None if np.std(a) > 0 else "needs acceleration"
+
+
+def excite_temperature(ctx):
+    have = [c for c in ("winding_temperature", "housing_temperature") if c in ctx.have]
+    if not have:
+        return "needs winding_temperature or housing_temperature"
+    T = ctx.dsig("T_w")
+    span = float(np.nanmax(T) - np.nanmin(T))
+    return None if span >= 3.0 else f"needs a temperature change of a few K (recorded span {span:.1f} K)"
+
+
+def excite_saturation(ctx):
+    i = np.abs(ctx.dsig("i_q"))
+    lim = ctx.params.drive.current_limit
+    top = float(np.percentile(i, 99.5))
+    return None if top >= 0.4 * lim else (f"needs high current (99.5th percentile |i_q| = {top:.3g} A, "
+                                          f"limit {lim:.3g} A)")
+
+
+def excite_headroom(ctx):
+    if "headroom" not in ctx.sig:
+        return "needs voltage_q"
+    h = ctx.dsig("headroom")
+    return None if _frac(h > 0.9) > 0.005 else "needs operation near the voltage limit (|v|/v_max > 0.9)"
+
+
+def excite_dead_time(ctx):
+    i = ctx.dsig("i_q")
+    pos, neg = _frac(i > 0), _frac(i < 0)
+    return None if min(pos, neg) > 0.05 else "needs current of both signs"
+
+
+# ---------------------------------------------------------------------------------------- variants
+
+def v_single(effect, cols, label="", **kw):
+    return lambda ctx, loc: [Variant(effect, label or effect, cols, **kw)]
+
+
+def v_stribeck(ctx, loc):
+    w = np.abs(ctx.dsig("omega_s"))
+    moving = w[w > 2 * ctx.omega_eps]
+    if len(moving) < 10:
+        return []
+    lo = max(2.0 * ctx.omega_eps, float(np.percentile(moving, 2)))
+    hi = max(lo * 1.5, 0.5 * float(np.median(moving)))
+    out = []
+    for ws in np.geomspace(lo, hi, 6):
+        ws = float(ws)
+
+        def rebuild(c, value):
+            return {"stribeck": col_stribeck(value)}
+
+        out.append(Variant("stribeck_friction", f"omega_s={ws:.3g} rad/s", {f"stribeck@{ws:.6g}": col_stribeck(ws)},
+                           hyper={"omega_s": ws},
+                           nonlinear={"omega_s": (ws, lo / 2, hi * 2, lambda c, v: {f"stribeck@{ws:.6g}": col_stribeck(v)})}))
+    return out
+
+
+def _cogging_orders(ctx, loc) -> list[int]:
+    p = ctx.params.motor.pole_pairs
+    orders = []
+    if ctx.params.effects.cogging_order:
+        orders.append(int(ctx.params.effects.cogging_order))
+    spec = (loc.get("mechanical") or {}).get("order_spectrum") or {}
+    for pk in spec.get("peaks", [])[:4]:
+        o = int(pk["order"])
+        if o not in orders and o >= max(4, p):
+            orders.append(o)
+    return orders
+
+
+def v_cogging(ctx, loc):
+    out = []
+    for o in _cogging_orders(ctx, loc):
+        for nh in (1, 2):
+            cols = {}
+            for k in range(1, nh + 1):
+                cols[f"cog{o}c{k}"] = col_harmonic(o, k, "cos")
+                cols[f"cog{o}s{k}"] = col_harmonic(o, k, "sin")
+            out.append(Variant("cogging_torque", f"order {o}, {nh} harmonic{'s' if nh > 1 else ''}", cols,
+                               hyper={"order": o, "harmonics": nh}))
+    return out
+
+
+def v_eripple(ctx, loc):
+    p = ctx.params.motor.pole_pairs
+    forms = [("current-sensor offset (order p, independent of current)", p, False),
+             ("current-sensor gain mismatch (order 2p, proportional to current)", 2 * p, True),
+             ("flux / dead-time harmonic (order 6p, proportional to current)", 6 * p, True),
+             ("torque ripple at order 6p (independent of current)", 6 * p, False)]
+    out = []
+    for label, order, weighted in forms:
+        tag = "i" if weighted else "c"
+        cols = {f"er{order}{tag}cos": col_harmonic(order, 1, "cos", weighted),
+                f"er{order}{tag}sin": col_harmonic(order, 1, "sin", weighted)}
+        out.append(Variant("electrical_angle_ripple", label, cols, hyper={"order": order, "current_weighted": weighted},
+                           additive=True))
+    return out
+
+
+def v_load(ctx, loc):
+    cols = {"load_sin": col_load("sin"), "load_cos": col_load("cos"), "load_const": col_load("const")}
+    out = [Variant("position_dependent_load", "gravity-like sin/cos of the output angle + constant", dict(cols))]
+    N = ctx.params.gear.gear_ratio
+    th = ctx.dsig("theta") / N
+    if float(np.nanmax(th) - np.nanmin(th)) < 4 * math.pi:
+        c2 = dict(cols)
+        c2["load_lin"] = col_load("lin")
+        out.append(Variant("position_dependent_load", "gravity + spring + constant", c2))
+    return out
+
+
+def v_kt(ctx, loc):
+    out = []
+    if "electrical" in ctx.blocks and "mechanical" in ctx.blocks:
+        out.append(Variant("torque_constant_error", "flux: same factor on torque and back-EMF",
+                           {"kt_both": col_kt(("mechanical", "electrical"))}, hyper={"equations": "both"}))
+    if "mechanical" in ctx.blocks:
+        out.append(Variant("torque_constant_error", "torque only (current scale / torque frame)",
+                           {"kt_mech": col_kt(("mechanical",))}, hyper={"equations": "mechanical"}))
+    if "electrical" in ctx.blocks:
+        out.append(Variant("torque_constant_error", "back-EMF only",
+                           {"kt_elec": col_kt(("electrical",))}, hyper={"equations": "electrical"}))
+    return out
+
+
+def v_vsat(ctx, loc):
+    return [Variant("voltage_saturation", f"voltage limit at {f:.2f} x nominal", {f"vsat@{f:.2f}": col_vsat(f)},
+                    hyper={"limit_fraction": f}) for f in (0.8, 0.9, 0.95)]
+
+
+# ------------------------------------------------------------------------------ parameter mapping
+
+def _sd(cov, i):
+    v = cov[i, i] if cov.size else float("nan")
+    return float(math.sqrt(v)) if v >= 0 and math.isfinite(v) else float("nan")
+
+
+def params_generic(names_units_fields):
+    """Map each column key (in order) to (name, unit, field, offset_from_nominal: callable(params)->nominal)."""
+    def f(coef, cov, keys, variant, ctx):
+        out = {}
+        for i, k in enumerate(keys):
+            name, unit, fld, nominal = names_units_fields[k] if k in names_units_fields else (k, "", None, None)
+            base = nominal(ctx.params) if nominal else 0.0
+            out[name] = {"value": base + float(coef[i]), "sd": _sd(cov, i), "unit": unit, "field": fld,
+                         "delta": float(coef[i])}
+        return out
+    return f
+
+
+def _flat(field_name):
+    return lambda p: p.to_flat()[field_name]
+
+
+def params_friction(coef, cov, keys, variant, ctx):
+    out = {}
+    for i, k in enumerate(keys):
+        if k == "fric_sign":
+            out["coulomb_friction"] = {"value": ctx.params.effects.coulomb_friction + coef[i], "sd": _sd(cov, i),
+                                       "unit": "N*m", "field": "effects.coulomb_friction", "delta": float(coef[i])}
+        elif k == "fric_abs":
+            out["friction_asymmetry"] = {"value": ctx.params.effects.friction_asymmetry + coef[i], "sd": _sd(cov, i),
+                                         "unit": "N*m", "field": "effects.friction_asymmetry", "delta": float(coef[i])}
+        elif k.startswith("stribeck"):
+            out["stribeck_friction"] = {"value": ctx.params.effects.stribeck_friction + coef[i], "sd": _sd(cov, i),
+                                        "unit": "N*m", "field": "effects.stribeck_friction", "delta": float(coef[i])}
+    return out
+
+
+def params_cogging(coef, cov, keys, variant, ctx):
+    out = {"cogging_order": {"value": variant.hyper["order"], "sd": 0.0, "unit": "", "field": "effects.cogging_order"}}
+    for i, k in enumerate(keys):
+        kind = "cos" if "c" in k.split(str(variant.hyper["order"]), 1)[1][:1] else "sin"
+        h = int(k[-1])
+        out[f"cogging_{kind}_{h}"] = {"value": float(coef[i]), "sd": _sd(cov, i), "unit": "N*m",
+                                      "field": f"effects.cogging_{kind}[{h - 1}]", "delta": float(coef[i])}
+    amp = math.hypot(*(coef[:2])) if len(coef) >= 2 else float("nan")
+    out["amplitude_1"] = {"value": amp, "sd": float(max(_sd(cov, 0), _sd(cov, 1))) if len(coef) >= 2 else float("nan"),
+                          "unit": "N*m", "field": None}
+    return out
+
+
+def params_eripple(coef, cov, keys, variant, ctx):
+    o = variant.hyper["order"]
+    w = variant.hyper["current_weighted"]
+    unit = "N*m/A" if w else "N*m"
+    amp = math.hypot(coef[0], coef[1])
+    ph = math.atan2(coef[1], coef[0])
+    return {f"ripple_order_{o}{'_per_amp' if w else ''}_amplitude": {"value": amp, "sd": max(_sd(cov, 0), _sd(cov, 1)),
+                                                                      "unit": unit, "field": None},
+            f"ripple_order_{o}{'_per_amp' if w else ''}_phase": {"value": ph, "sd": float("nan"), "unit": "rad",
+                                                                  "field": None},
+            "_cos": {"value": float(coef[0]), "sd": _sd(cov, 0), "unit": unit, "field": None},
+            "_sin": {"value": float(coef[1]), "sd": _sd(cov, 1), "unit": unit, "field": None}}
+
+
+def params_load(coef, cov, keys, variant, ctx):
+    ld = ctx.params.load
+    c = dict(zip(keys, coef))
+    # nominal gravity as sin/cos components: τ_g sin(θ + φ) = τ_g cos φ sin θ + τ_g sin φ cos θ
+    a_s = ld.gravity_torque * math.cos(ld.gravity_phase) + c.get("load_sin", 0.0)
+    a_c = ld.gravity_torque * math.sin(ld.gravity_phase) + c.get("load_cos", 0.0)
+    g = math.hypot(a_s, a_c)
+    phi = math.atan2(a_c, a_s)
+    i_s, i_c = keys.index("load_sin"), keys.index("load_cos")
+    sd_g = math.sqrt(max(0.0, (a_s ** 2 * cov[i_s, i_s] + a_c ** 2 * cov[i_c, i_c] + 2 * a_s * a_c * cov[i_s, i_c])
+                         / max(g * g, 1e-300)))
+    sd_phi = math.sqrt(max(0.0, (a_c ** 2 * cov[i_s, i_s] + a_s ** 2 * cov[i_c, i_c] - 2 * a_s * a_c * cov[i_s, i_c])
+                           / max(g ** 4, 1e-300)))
+    out = {"gravity_torque": {"value": g, "sd": sd_g, "unit": "N*m", "field": "load.gravity_torque"},
+           "gravity_phase": {"value": phi, "sd": sd_phi, "unit": "rad", "field": "load.gravity_phase"}}
+    k0 = keys.index("load_const")
+    const = ld.load_torque + c["load_const"]
+    if "load_lin" in c:
+        k = ld.spring_stiffness + c["load_lin"]
+        kl = keys.index("load_lin")
+        out["spring_stiffness"] = {"value": k, "sd": _sd(cov, kl), "unit": "N*m/rad", "field": "load.spring_stiffness"}
+        # spring zero kept; its constant part moves into load_torque
+        const = const + ld.spring_stiffness * ld.spring_zero - k * ld.spring_zero
+    out["load_torque"] = {"value": const, "sd": _sd(cov, k0), "unit": "N*m", "field": "load.load_torque"}
+    return out
+
+
+def params_kt(coef, cov, keys, variant, ctx):
+    K0 = ctx.params.motor.torque_constant_q
+    ratio = 1.0 + float(coef[0])
+    sd = _sd(cov, 0)
+    return {"torque_constant_q": {"value": K0 * ratio, "sd": K0 * sd, "unit": "N*m/A", "field": "motor.torque_constant_q"},
+            "ratio_to_nominal": {"value": ratio, "sd": sd, "unit": "", "field": None},
+            "frame_factor": {"value": match_frame_factor(ratio, sd), "sd": 0.0, "unit": "", "field": None}}
+
+
+def params_r_temp(coef, cov, keys, variant, ctx):
+    m = ctx.params.motor
+    a0 = m.copper_temperature_coefficient if m.resistance_temperature_enabled else 0.0
+    return {"copper_temperature_coefficient": {"value": a0 + coef[0], "sd": _sd(cov, 0), "unit": "1/K",
+                                               "field": "motor.copper_temperature_coefficient"}}
+
+
+def params_magnet(coef, cov, keys, variant, ctx):
+    m = ctx.params.motor
+    b0 = m.magnet_temperature_coefficient if m.magnet_temperature_enabled else 0.0
+    return {"magnet_temperature_coefficient": {"value": b0 + coef[0], "sd": _sd(cov, 0), "unit": "1/K",
+                                               "field": "motor.magnet_temperature_coefficient"}}
+
+
+# ------------------------------------------------------------------------------------------ library
+
+def library() -> dict[str, Candidate]:
+    """Every candidate effect by its identifier (the names used in the JSON report)."""
+    C = {}
+
+    def add(c: Candidate):
+        C[c.name] = c
+
+    mech_needs = ("current", "velocity|position")
+    add(Candidate("coulomb_friction", ("mechanical",), mech_needs,
+                  "Coulomb (dry) friction: a constant torque opposing the motion, a step at zero speed",
+                  True, {"dead_time": "dead time acts on the voltage equation (needs voltage_q); friction on torque",
+                         "asymmetric_friction": "move at the same speeds in both directions"},
+                  v_single("coulomb_friction", {"fric_sign": col_fric_sign}), excite_friction, params_friction))
+    add(Candidate("asymmetric_friction", ("mechanical",), mech_needs,
+                  "direction-dependent friction: different dry friction for positive and negative motion",
+                  True, {"position_dependent_load": "hold still at several angles, or move in both directions over "
+                         "the same angles: a load depends on angle, friction on direction",
+                         "coulomb_friction": "move at the same speeds in both directions"},
+                  v_single("asymmetric_friction", {"fric_sign": col_fric_sign, "fric_abs": col_fric_abs}),
+                  excite_friction, params_friction))
+    add(Candidate("stribeck_friction", ("mechanical",), mech_needs,
+                  "Stribeck friction: extra friction at low speed that fades above the Stribeck velocity",
+                  True, {"coulomb_friction": "slow constant-speed sweeps (0.1-10x the Stribeck velocity)"},
+                  v_stribeck, excite_stribeck, params_friction))
+    add(Candidate("viscous_friction", ("mechanical",), mech_needs,
+                  "viscous damping: friction torque growing in proportion to speed",
+                  True, {"iron_loss": "iron loss also heats the stator: record temperatures at high speed, low current"},
+                  v_single("viscous_friction", {"visc": col_viscous}), excite_viscous,
+                  params_generic({"visc": ("viscous_damping", "N*m*s/rad", "motor.viscous_damping",
+                                           _flat("motor.viscous_damping"))})))
+    add(Candidate("cogging_torque", ("mechanical",), ("current", "position"),
+                  "cogging torque: torque ripple locked to the rotor angle (slots x magnets), present without current",
+                  True, {"electrical_angle_ripple": "repeat at a different current: cogging does not scale with "
+                         "current; sensor-gain ripple does"},
+                  v_cogging, excite_angle(8), params_cogging))
+    add(Candidate("electrical_angle_ripple", ("mechanical",), ("current", "position"),
+                  "torque ripple locked to the ELECTRICAL angle (current-sensor offset at order p, gain mismatch at "
+                  "2p, flux harmonics / dead time at 6p)",
+                  False, {"cogging_torque": "repeat at a different current: cogging does not scale with current"},
+                  v_eripple, excite_angle(1), params_eripple))
+    add(Candidate("position_dependent_load", ("mechanical",), ("current", "position"),
+                  "a load that depends on the output angle (gravity, spring) plus a constant load",
+                  True, {"asymmetric_friction": "hold still at several angles, or move in both directions over the "
+                         "same angles"},
+                  v_load, excite_load, params_load))
+    add(Candidate("torque_constant_error", ("mechanical", "electrical"), ("current", "velocity|position"),
+                  "the torque / back-EMF constant is off (often a frame convention: sqrt(3/2), sqrt(2), sqrt(3)...)",
+                  True, {"inertia_error": "with a torque sensor, a known load, or voltage_q (back-EMF) the two "
+                         "separate; from current and motion alone only K_t/J is known"},
+                  v_kt, None, params_kt))
+    add(Candidate("inertia_error", ("mechanical",), mech_needs,
+                  "the rotor + load inertia is off", True,
+                  {"torque_constant_error": "record voltage_q (back-EMF gives K directly) or a known load / torque "
+                   "sensor"},
+                  v_single("inertia_error", {"inertia": col_inertia}), excite_inertia,
+                  params_generic({"inertia": ("rotor_inertia", "kg*m^2", "motor.rotor_inertia",
+                                              _flat("motor.rotor_inertia"))})))
+    add(Candidate("resistance_error", ("electrical",), ("voltage_q", "current", "velocity|position"),
+                  "the winding resistance is off (at the reference temperature)", True,
+                  {"resistance_temperature": "hold a current while the winding warms, with winding temperature "
+                   "recorded"},
+                  v_single("resistance_error", {"r_err": col_r_err}), None,
+                  params_generic({"r_err": ("phase_resistance", "ohm", "motor.phase_resistance",
+                                            _flat("motor.phase_resistance"))})))
+    add(Candidate("inductance_error", ("electrical",), ("voltage_q", "current", "velocity|position"),
+                  "the q-axis inductance is off", True,
+                  {"current_loop_delay": "current steps recorded at a higher rate than the current loop"},
+                  v_single("inductance_error", {"l_err": col_l_err}), None,
+                  params_generic({"l_err": ("q_inductance", "H", "motor.q_inductance", _flat("motor.q_inductance"))})))
+    add(Candidate("resistance_temperature", ("electrical",),
+                  ("voltage_q", "current", "velocity|position", "winding_temperature|housing_temperature"),
+                  "winding resistance rising with temperature (copper, about +0.39 %/K)", True,
+                  {"magnet_temperature": "the magnet term also changes the torque and back-EMF; spin unloaded when "
+                   "hot and cold"},
+                  v_single("resistance_temperature", {"r_temp": col_r_temp}), excite_temperature, params_r_temp))
+    add(Candidate("magnet_temperature", ("mechanical", "electrical"),
+                  ("current", "velocity|position", "winding_temperature|housing_temperature"),
+                  "magnet flux (torque and back-EMF constant) falling with temperature (NdFeB about -0.1 %/K)",
+                  True, {"resistance_temperature": "spin unloaded when hot and when cold: only the flux changes the "
+                         "back-EMF"},
+                  v_single("magnet_temperature", {"magnet": col_magnet}), excite_temperature, params_magnet))
+    add(Candidate("magnetic_saturation", ("mechanical",), mech_needs,
+                  "magnetic saturation: torque per amp falls at high current", False,
+                  {"torque_constant_error": "steps to several current levels: saturation only bends the top"},
+                  v_single("magnetic_saturation", {"sat": col_saturation}), excite_saturation,
+                  params_generic({"sat": ("saturation_coefficient", "1/A", None, None)})))
+    add(Candidate("voltage_saturation", ("electrical",), ("voltage_q", "current", "velocity|position"),
+                  "the inverter cannot apply the requested voltage near the limit (bus sag, modulation limit)", False,
+                  {"dead_time": "run at high speed with low current, and at low speed with high current"},
+                  v_vsat, excite_headroom,
+                  params_generic({f"vsat@{f:.2f}": ("clipped_fraction", "", None, None) for f in (0.8, 0.9, 0.95)})))
+    add(Candidate("dead_time", ("electrical",), ("voltage_q", "current", "velocity|position"),
+                  "inverter dead time: the applied voltage falls short by a constant times the sign of the current",
+                  False, {"coulomb_friction": "friction acts on torque: compare the voltage equation at standstill "
+                          "with current of both signs"},
+                  v_single("dead_time", {"dead": col_dead_time}), excite_dead_time,
+                  params_generic({"dead": ("dead_time_voltage", "V", None, None)})))
+    add(Candidate("current_loop_delay", ("electrical",), ("voltage_q", "current", "velocity|position"),
+                  "the recorded voltage leads the current by a delay (PWM / computation delay)", False,
+                  {"inductance_error": "current steps recorded at a higher rate than the current loop"},
+                  v_single("current_loop_delay", {"delay": col_delay}), None,
+                  params_generic({"delay": ("delay", "s", None, None)})))
+    add(Candidate("thermal_parameters", ("thermal",), ("current", "winding_temperature|housing_temperature"),
+                  "the thermal network (R_wh, R_ha, C_w, C_h) is off", True,
+                  {"iron_loss": "hold current at standstill (no iron loss) and spin at high speed with no current"},
+                  None, None, None))
+    add(Candidate("iron_loss", ("thermal",), ("current", "velocity|position", "winding_temperature|housing_temperature"),
+                  "iron (core) loss: heat growing with speed, with little current", False,
+                  {"thermal_parameters": "spin at high speed with no current: only iron loss heats then"},
+                  None, None, None))
+    return C
+
+
+EFFECT_NAMES = tuple(library())
+THERMAL = ("thermal_parameters", "iron_loss")
+
+
+# ------------------------------------------------------------------------------------------ evidence
+
+def _bins(loc, eq, view):
+    return ((loc.get(eq) or {}).get("bins") or {}).get(view) or []
+
+
+def _fmt(x, unit):
+    return f"{x:+.3g} {unit.split(' ')[0]}"
+
+
+def _velocity_story(loc, eq="mechanical") -> str | None:
+    bins = _bins(loc, eq, "velocity")
+    if not bins:
+        return None
+    unit = loc[eq]["unit"]
+    pos = [b for b in bins if b["lo"] >= 0 and b["count"] > 0 and b["label"] != "|ω|≈0"]
+    neg = [b for b in bins if b["hi"] <= 0 and b["count"] > 0 and b["label"] != "|ω|≈0"]
+    zero = [b for b in bins if b["label"] == "|ω|≈0" and b["count"] > 0]
+    if not pos or not neg:
+        return None
+    mp = np.average([b["mean"] for b in pos], weights=[b["count"] for b in pos])
+    mn = np.average([b["mean"] for b in neg], weights=[b["count"] for b in neg])
+    zmax = max(abs(b["z"]) for b in pos + neg)
+    s = (f"{eq} residual by speed: mean {_fmt(mp, unit)} for ω>0, {_fmt(mn, unit)} for ω<0 "
+         f"(|z| up to {zmax:.0f})")
+    if mp * mn < 0:
+        s += "; it changes sign with the direction of motion (a step at zero speed)"
+        if abs(abs(mp) - abs(mn)) > 0.2 * max(abs(mp), abs(mn)):
+            s += ", with different size per direction"
+    elif abs(mp - mn) < 0.3 * max(abs(mp), abs(mn)):
+        s += "; same sign in both directions (an offset, not friction)"
+    slow = [b for b in pos + neg if "slow" in b["label"]]
+    fast = [b for b in pos + neg if "fast" in b["label"]]
+    if slow and fast:
+        ms = np.mean([abs(b["mean"]) for b in slow])
+        mf = np.mean([abs(b["mean"]) for b in fast])
+        s += f"; |mean| {ms:.3g} at low speed vs {mf:.3g} at high speed"
+    if zero:
+        s += f"; near-zero-speed bin {_fmt(zero[0]['mean'], unit)} ({zero[0]['count']} samples)"
+    return s
+
+
+def _trend_story(loc, eq, view, what) -> str | None:
+    bins = [b for b in _bins(loc, eq, view) if b["count"] > 0]
+    if len(bins) < 2:
+        return None
+    unit = loc[eq]["unit"]
+    first, last = bins[0], bins[-1]
+    return (f"{eq} residual by {what}: RMS {first['rms']:.3g} in {first['label']} vs {last['rms']:.3g} in "
+            f"{last['label']} (mean {_fmt(first['mean'], unit)} -> {_fmt(last['mean'], unit)})")
+
+
+def _spectrum_story(loc, order, eq="mechanical") -> str | None:
+    spec = (loc.get(eq) or {}).get("order_spectrum") or {}
+    if not spec.get("orders"):
+        return None
+    o = np.array(spec["orders"])
+    a = np.array(spec["amplitude"])
+    i = np.flatnonzero(o == order)
+    if not len(i):
+        return None
+    med = float(np.median(a[(o >= order / 2) & (o <= 2 * order)])) if len(a) else float("nan")
+    rank = int((a > a[i[0]]).sum()) + 1
+    marks = {v: k for k, v in spec.get("marks", {}).items()}
+    tag = f" (= {marks[order]})" if order in marks else ""
+    return (f"angle-order spectrum of the {eq} residual: order {order}{tag} has amplitude {a[i[0]]:.3g} "
+            f"= {a[i[0]] / med:.1f}x the local median (rank {rank} of {len(a)} orders)")
+
+
+def evidence(effect: str, variant: Variant, loc: dict, extra: dict) -> list[str]:
+    """Plain-word pointers from the locate results to this effect (its fingerprint), plus the selection
+    numbers. ``extra``: ``explained`` (share of the nominal residual variance its columns explain),
+    ``dbic``, ``heldout``."""
+    out: list[str] = []
+    if effect in ("coulomb_friction", "asymmetric_friction", "stribeck_friction", "viscous_friction"):
+        s = _velocity_story(loc)
+        if s:
+            out.append(s)
+    elif effect in ("cogging_torque", "electrical_angle_ripple"):
+        s = _spectrum_story(loc, int(variant.hyper["order"]))
+        if s:
+            out.append(s)
+    elif effect in ("torque_constant_error", "magnetic_saturation"):
+        for eq in ("mechanical", "electrical"):
+            s = _trend_story(loc, eq, "current", "|current|")
+            if s:
+                out.append(s)
+    elif effect in ("resistance_temperature", "magnet_temperature"):
+        for eq in ("electrical", "mechanical"):
+            s = _trend_story(loc, eq, "temperature", "temperature")
+            if s:
+                out.append(s)
+    elif effect == "voltage_saturation":
+        s = _trend_story(loc, "electrical", "headroom", "voltage headroom |v|/v_max")
+        if s:
+            out.append(s)
+    elif effect in ("dead_time", "resistance_error", "inductance_error", "current_loop_delay"):
+        s = _trend_story(loc, "electrical", "current", "|current|")
+        if s:
+            out.append(s)
+    elif effect == "position_dependent_load":
+        s = _velocity_story(loc)
+        if s:
+            out.append(s)
+    for eq in ("mechanical", "electrical"):
+        wins = (loc.get(eq) or {}).get("windows") or []
+        if wins and effect in ("resistance_temperature", "magnet_temperature", "thermal_parameters", "iron_loss"):
+            w = max(wins, key=lambda x: x["ratio_to_quietest"])
+            out.append(f"{eq} residual changes level at t = {w['start']:.1f}-{w['stop']:.1f} s "
+                       f"({w['ratio_to_quietest']:.1f}x the quietest segment)")
+    if "explained" in extra:
+        out.append(f"its regressors explain {100 * extra['explained']:.1f}% of the nominal equation-error "
+                   f"variance (training data)")
+    if "dbic" in extra:
+        ho = extra.get("heldout", {})
+        out.append(f"selection: ΔBIC {extra['dbic']:.1f}; held-out residual RMS -{100 * ho.get('rel', 0):.1f}% "
+                   f"(t = {ho.get('t', 0):.1f})")
+    return out

@@ -1,0 +1,142 @@
+"""``bldc-actuator diagnose``: the command-line face of :func:`.pipeline.diagnose`.
+
+    bldc-actuator diagnose RECORDING --params PARAMS.yaml [--map CANONICAL=EXPR ...] [--map-file F]
+                           --json REPORT.json --report DIR [--updated-params OUT.yaml]
+                           [--effects a,b] [--holdout FRACTION | --holdout-file F]
+
+Exit status: 0 when the diagnosis ran (whatever it found), 2 on bad input (the message names the file,
+field or option).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+HELP = "locate where a recording and the model differ, name the missing physics, fit it, show the improvement"
+
+
+def register(subparsers) -> None:
+    from .candidates import EFFECT_NAMES
+
+    p = subparsers.add_parser("diagnose", help=HELP, description=HELP + ". See docs and issue 4.",
+                              formatter_class=argparse.RawDescriptionHelpFormatter,
+                              epilog="effects: " + ", ".join(EFFECT_NAMES))
+    p.add_argument("recording", metavar="RECORDING", help="CSV or MCAP recording")
+    p.add_argument("--params", required=True, metavar="PARAMS.yaml",
+                   help="nominal parameter file (the node's YAML) or a preset name")
+    p.add_argument("--map", action="append", default=[], metavar="CANONICAL=EXPR",
+                   help="rename/scale a column, e.g. velocity=speed*9 (repeatable)")
+    p.add_argument("--map-file", metavar="F", help="YAML mapping {canonical: expression}")
+    p.add_argument("--json", metavar="REPORT.json", help="write the JSON report here")
+    p.add_argument("--report", metavar="DIR", help="write report.md and PNG plots into DIR")
+    p.add_argument("--updated-params", metavar="OUT.yaml",
+                   help="write the parameter file with the accepted effects fitted")
+    p.add_argument("--effects", metavar="a,b", help="test only these candidate effects (comma-separated)")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--holdout", type=float, default=0.3, metavar="FRACTION",
+                   help="fraction of the recording held out, in interleaved time blocks (default 0.3)")
+    g.add_argument("--holdout-file", metavar="F", help="a second recording used as held-out data")
+    p.add_argument("--cutoff", type=float, metavar="HZ", help="parallel low-pass cut-off (default min(fs/10, 100 Hz))")
+    p.add_argument("--window", type=float, default=0.1, metavar="S", help="replay window length (default 0.1 s)")
+    p.add_argument("--no-plots", action="store_true", help="Markdown report without PNGs")
+    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    p.set_defaults(func=run)
+
+
+def _fail(msg: str) -> int:
+    print(f"bldc-actuator diagnose: error: {msg}", file=sys.stderr)
+    return 2
+
+
+def _load(path: str, mapping, params):
+    from . import cleaning, loaders
+
+    raw = loaders.load(path, mapping=mapping, params=params)
+    return cleaning.clean(raw, params=params)
+
+
+def run(args) -> int:
+    from ..params import ParameterError, load_preset
+    from .pipeline import DiagnoseOptions, diagnose
+
+    try:
+        params = load_preset(args.params)
+    except (ParameterError, FileNotFoundError) as exc:
+        return _fail(f"--params {args.params}: {exc}")
+    try:
+        from .loaders import Mapping
+
+        mapping = Mapping.from_yaml(args.map_file) if args.map_file else Mapping()
+        extra = Mapping.parse(args.map)
+        mapping.columns.update(extra.columns)
+        mapping.scale.update(extra.scale)
+        mapping.offset.update(extra.offset)
+        if not mapping.columns:
+            mapping = None
+    except ValueError as exc:
+        return _fail(str(exc))
+    effects = [e.strip() for e in args.effects.split(",") if e.strip()] if args.effects else None
+    try:
+        DiagnoseOptions(effects=effects).validated_effects()
+    except ValueError as exc:
+        return _fail(f"--{exc}")
+    if args.holdout_file is None and not (0.0 < args.holdout < 1.0):
+        return _fail(f"--holdout: expected a fraction 0 < f < 1, got {args.holdout!r}")
+    for name in ("recording", "holdout_file"):
+        path = getattr(args, name)
+        if path is not None and not Path(path).exists():
+            return _fail(f"{path}: no such file")
+    progress = not args.quiet
+    try:
+        if progress:
+            print(f"[diagnose] loading {args.recording}", file=sys.stderr, flush=True)
+        signals = _load(args.recording, mapping, params)
+        holdout_signals = _load(args.holdout_file, mapping, params) if args.holdout_file else None
+    except (ValueError, OSError) as exc:    # LoadError is a ValueError
+        return _fail(str(exc))
+    options = DiagnoseOptions(effects=effects, holdout=args.holdout, holdout_signals=holdout_signals,
+                              cutoff_hz=args.cutoff, window_s=args.window, progress=progress)
+    try:
+        report = diagnose(signals, params, options=options)
+    except ValueError as exc:
+        return _fail(str(exc))
+    if args.json:
+        report.write_json(args.json)
+    if args.report:
+        report.write_markdown(args.report, plots=not args.no_plots)
+    if args.updated_params and report.updated_params is not None:
+        report.write_params(args.updated_params)
+    _print_summary(report, args)
+    return 0
+
+
+def _print_summary(report, args) -> None:
+    print(report.verdict)
+    for f in report.findings:
+        pars = ", ".join(f"{k}={_fmt(v)}±{_fmt(f['uncertainty'].get(k))}" for k, v in f["parameters"].items()
+                         if not isinstance(v, str))
+        tag = "" if f.get("simulated", True) else " [not yet simulated]"
+        ho = f.get("held_out") or {}
+        line = f"  {f['effect']}{tag}: {pars}"
+        if f.get("frame_factor"):
+            line += f"; frame factor {f['frame_factor']}"
+        if ho:
+            line += f"; held-out {ho['metric']}: {_fmt(ho['before'])} -> {_fmt(ho['after'])} {ho.get('unit', '')}"
+        print(line)
+    for a in report.aliases:
+        print(f"  alias: {a['message']}; experiment: {a['experiment']}")
+    for x in report.not_checkable:
+        print(f"  not checkable: {x['effect']}: {x['reason']}")
+    for name, path in (("json", args.json), ("report", args.report and str(Path(args.report) / "report.md")),
+                       ("updated params", args.updated_params)):
+        if path:
+            print(f"  wrote {name}: {path}")
+
+
+def _fmt(x) -> str:
+    try:
+        return f"{float(x):.4g}"
+    except (TypeError, ValueError):
+        return str(x)

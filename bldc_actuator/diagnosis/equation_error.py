@@ -1,0 +1,751 @@
+"""Equation error: the model's equations evaluated on measured signals, with parallel filtering.
+
+Two equations of the q-axis model (see :mod:`bldc_actuator.model`), written as residuals that are zero when
+the nominal parameters are right (motor side, SI):
+
+mechanical [N·m]   ``r_m = K(T_h) i_q - J dω/dt - b ω - τ_f(ω) - τ_cog(θ) - τ_ext/N``
+                   (``τ_ext`` = torque-sensor reading when there is one, else the nominal load
+                   ``load.*`` plus the ``load_torque`` channel; all at the output)
+electrical [V]     ``r_e = v_q - R(T_w) i_q - L di_q/dt - K(T_h) ω - p ω L i_d``  (needs ``voltage_q``)
+
+A missing effect shows up as ``r = Σ columns · Δparameters``; :mod:`.candidates` builds those columns.
+
+Parallel filtering: every column and every target is built at the raw rate, then the SAME zero-phase
+Butterworth low-pass (``scipy.signal.sosfiltfilt``) and the same decimation are applied to all of them,
+per gap-free segment. Filtering only the target would make the filter's own lag look like physics.
+Masked (NaN) samples are filled for the filter and the mask is filtered too: a decimated sample is used
+only when its whole filter support was valid. Statistics (fits, BIC, held-out gates) use decimated data.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+from scipy import signal as sps
+
+from .. import effects, frames
+from ..params import ActuatorParams
+
+EQUATIONS = ("mechanical", "electrical")
+UNITS = {"mechanical": "N*m (motor side)", "electrical": "V (q-axis)"}
+
+
+# -- filtering and decimation ---------------------------------------------------------------------
+
+@dataclass
+class Decimator:
+    """Zero-phase low-pass at ``fc`` [Hz] then keep every ``q``-th sample, per segment.
+
+    ``segments`` are ``[start, stop)`` raw index ranges; segments too short for the filter are dropped.
+    """
+
+    fs: float
+    fc: float
+    q: int
+    segments: list[tuple[int, int]]
+    order: int = 4
+    steady: bool = False            #: table of steady-state points: no filter, no decimation
+    sos: Any = None
+    idx: np.ndarray = field(default=None)      #: raw index of every decimated sample
+    seg_of: np.ndarray = field(default=None)   #: segment number of every decimated sample
+    edge: np.ndarray = field(default=None)     #: True where the sample sits in a segment's edge zone
+
+    def __post_init__(self):
+        if not self.steady:
+            self.sos = sps.butter(self.order, self.fc / (0.5 * self.fs), output="sos")
+        idx, seg, edge = [], [], []
+        margin = 0 if self.steady else int(math.ceil(1.5 * self.fs / self.fc))
+        for k, (a, b) in enumerate(self.segments):
+            if not self.usable(a, b):
+                continue
+            i = np.arange(a, b, 1 if self.steady else self.q)
+            idx.append(i)
+            seg.append(np.full(len(i), k))
+            edge.append((i < a + margin) | (i >= b - margin))
+        self.idx = np.concatenate(idx) if idx else np.zeros(0, int)
+        self.seg_of = np.concatenate(seg) if seg else np.zeros(0, int)
+        self.edge = np.concatenate(edge) if edge else np.zeros(0, bool)
+
+    def usable(self, a: int, b: int) -> bool:
+        if self.steady:
+            return b > a
+        return (b - a) > max(40, 6 * (2 * self.order + 1), int(4 * self.fs / self.fc))
+
+    def __len__(self) -> int:
+        return len(self.idx)
+
+    def apply(self, x: np.ndarray) -> np.ndarray:
+        """Filter + decimate a raw column (n,) or matrix (n, k); NaN-free input expected."""
+        x = np.asarray(x, dtype=float)
+        if self.steady:
+            return x[self.idx]
+        out = []
+        for a, b in self.segments:
+            if not self.usable(a, b):
+                continue
+            y = sps.sosfiltfilt(self.sos, x[a:b], axis=0)
+            out.append(y[:: self.q])
+        if not out:
+            return np.zeros((0,) + x.shape[1:])
+        return np.concatenate(out, axis=0)
+
+    def lowpass(self, x: np.ndarray, fc: float | None = None) -> np.ndarray:
+        """Zero-phase low-pass at the raw rate (no decimation), per segment."""
+        x = np.asarray(x, dtype=float)
+        if self.steady:
+            return x.copy()
+        sos = self.sos if fc is None else sps.butter(self.order, min(fc, 0.45 * self.fs) / (0.5 * self.fs),
+                                                     output="sos")
+        out = x.copy()
+        for a, b in self.segments:
+            if b - a > 6 * (2 * self.order + 1):
+                out[a:b] = sps.sosfiltfilt(sos, x[a:b], axis=0)
+        return out
+
+    def mask(self, valid_raw: np.ndarray) -> np.ndarray:
+        """Decimated samples whose filter support was all valid (and not in an edge zone)."""
+        valid_raw = np.asarray(valid_raw, dtype=bool)
+        if self.steady:
+            return valid_raw[self.idx]
+        m = self.apply(valid_raw.astype(float))
+        return (np.abs(m - 1.0) < 0.01) & valid_raw[self.idx] & ~self.edge
+
+
+def choose_filter(fs: float, fc: float | None = None) -> tuple[float, int]:
+    """Cut-off [Hz] and decimation factor: default cut-off ``min(0.1 fs, 100 Hz)`` (well above the
+    mechanical dynamics, well below the current loop), decimated rate about 4 x cut-off."""
+    if fc is None:
+        fc = min(0.1 * fs, 100.0)
+    fc = float(min(fc, 0.4 * fs))
+    q = max(1, int(fs / (4.0 * fc)))
+    return fc, q
+
+
+# -- the prepared recording -------------------------------------------------------------------------
+
+def _fill(x: np.ndarray, ok: np.ndarray, segments) -> np.ndarray:
+    """Linear interpolation over masked samples within each segment (edges held)."""
+    x = np.array(x, dtype=float)
+    for a, b in segments:
+        o = ok[a:b]
+        if o.all():
+            continue
+        if not o.any():
+            x[a:b] = 0.0
+            continue
+        idx = np.arange(a, b)
+        x[a:b] = np.interp(idx, idx[o], x[a:b][o])
+    return x
+
+
+def _gradient(x: np.ndarray, t: np.ndarray, segments) -> np.ndarray:
+    out = np.zeros_like(x)
+    for a, b in segments:
+        if b - a >= 3:
+            out[a:b] = np.gradient(x[a:b], t[a:b])
+    return out
+
+
+def _lag(ctx, late: np.ndarray, ref: np.ndarray) -> float:
+    """Delay δ [s] of ``late`` behind ``ref`` (least squares on ``late ≈ ref - δ ref'``, low-passed)."""
+    a = ctx.dec.apply(late)
+    b = ctx.dec.apply(ref)
+    db = ctx.dec.apply(_gradient(ref, ctx.t, ctx.segments))
+    X = np.column_stack([b, -db])
+    try:
+        coef, *_ = np.linalg.lstsq(X, a, rcond=None)
+    except np.linalg.LinAlgError:
+        return 0.0
+    return float(coef[1] / coef[0]) if coef[0] else 0.0
+
+
+def _noise_std(x: np.ndarray) -> float:
+    """Sample-to-sample noise level (robust): MAD of first differences / sqrt(2)."""
+    d = np.diff(x)
+    if len(d) < 3:
+        return 0.0
+    return float(1.4826 * np.median(np.abs(d - np.median(d))) / math.sqrt(2.0))
+
+
+@dataclass
+class Context:
+    """A recording brought into the model's frame at the raw rate, plus its decimation.
+
+    Arrays are NaN-free (masked samples filled); ``valid[name]`` says which samples were real.
+    Derived signals: ``omega`` (measured, or differentiated position), ``omega_s`` (smoothed, for
+    nonlinear regressors), ``omega_dot``, ``theta`` (NaN-free rotor angle; ``theta_known``),
+    ``i_q``, ``i_d``, ``di_dt``, ``v_q``, ``dv_dt``, ``T_w``, ``T_h`` (measured, proxy or model),
+    ``v_max`` and ``headroom`` = |v|/v_max.
+    """
+
+    params: ActuatorParams
+    t: np.ndarray
+    segments: list[tuple[int, int]]
+    fs: float
+    dec: Decimator
+    have: set                                  #: canonical channels present
+    raw: dict[str, np.ndarray]                 #: canonical channels, filled
+    valid: dict[str, np.ndarray]               #: canonical channel -> raw validity
+    sig: dict[str, np.ndarray] = field(default_factory=dict)     #: derived signals (raw rate)
+    notes: list[str] = field(default_factory=list)
+    holdout_raw: np.ndarray | None = None      #: raw samples in the held-out part
+    omega_eps: float = 0.0                     #: velocity noise scale [rad/s] (friction smoothing)
+    steady: bool = False
+    blocks: dict[str, "Block"] = field(default_factory=dict)
+    nuisance: dict[str, Callable] = field(default_factory=dict)   #: always-fitted, never-reported columns
+    nuisance_reason: str = ""
+    _col_cache: dict = field(default_factory=dict)
+
+    # decimated helpers
+    @property
+    def t_dec(self) -> np.ndarray:
+        return self.t[self.dec.idx]
+
+    @property
+    def holdout_dec(self) -> np.ndarray:
+        return self.holdout_raw[self.dec.idx]
+
+    def dsig(self, name: str) -> np.ndarray:
+        """A derived signal at the decimated instants (filtered like everything else)."""
+        key = ("sig", name)
+        if key not in self._col_cache:
+            self._col_cache[key] = self.dec.apply(self.sig[name])
+        return self._col_cache[key]
+
+    def column(self, key: str, builder: Callable[["Context"], dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+        """Decimated column ``key`` (equation -> array), built at the raw rate by ``builder`` and cached."""
+        if key not in self._col_cache:
+            raw = builder(self)
+            out = {}
+            for eq, x in raw.items():
+                if eq in self.blocks:
+                    x = np.asarray(x, dtype=float)
+                    if x.ndim == 0:
+                        x = np.full(len(self.t), float(x))
+                    out[eq] = self.dec.apply(np.nan_to_num(x))
+            self._col_cache[key] = out
+        return self._col_cache[key]
+
+
+@dataclass
+class Block:
+    """One equation on decimated samples: ``target`` (nominal residual), ``valid`` rows."""
+
+    name: str
+    target: np.ndarray
+    valid: np.ndarray
+    unit: str
+    raw_target: np.ndarray      #: nominal residual at the raw rate, low-passed (for plots/locate)
+    needs: list[str]
+    excluded_rest: int = 0
+
+    def rows(self, holdout: np.ndarray, which: str) -> np.ndarray:
+        if which == "train":
+            return self.valid & ~holdout
+        if which == "holdout":
+            return self.valid & holdout
+        return self.valid
+
+
+def holdout_mask(t: np.ndarray, segments, fraction: float) -> np.ndarray:
+    """Held-out raw samples: the recording cut into 10 equal-time blocks (>= 1 s each when possible),
+    every k-th block held out (k = round(1/fraction)), starting with the second; so the held-out part
+    spans the recording (different excitation and temperature than its neighbours)."""
+    if not (0.0 < fraction < 1.0):
+        raise ValueError(f"holdout fraction: expected 0 < f < 1, got {fraction!r}")
+    t0, t1 = float(t[0]), float(t[-1])
+    dur = max(t1 - t0, 1e-9)
+    n_blocks = max(3, min(30, int(round(3.0 / fraction)), int(dur / 1.0) or 3))
+    edges = t0 + dur * np.arange(n_blocks + 1) / n_blocks
+    k = max(2, int(round(1.0 / fraction)))
+    blk = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, n_blocks - 1)
+    return (blk % k) == 1
+
+
+def prepare(parts: list[tuple[Any, bool]], params: ActuatorParams, *, fc: float | None = None,
+            holdout: float = 0.3) -> Context:
+    """Concatenate recordings (``(signals, is_holdout_recording)``), fill masks, derive signals, choose
+    the filter. With a single recording, the held-out part is chosen by :func:`holdout_mask`."""
+    times, chans, segs, hold = [], {}, [], []
+    offset, n0 = 0.0, 0
+    names: set = set()
+    notes: list[str] = []
+    steady = False
+    for sig, _ in parts:
+        names |= {k for k, v in sig.channels.items() if np.isfinite(np.asarray(v, float)).any()}
+        steady = steady or bool(getattr(sig, "meta", {}).get("steady_state_points", False))
+    for sig, is_ho in parts:
+        t = np.asarray(sig.time, dtype=float)
+        n = len(t)
+        if n == 0:
+            continue
+        tt = t - t[0] + offset
+        times.append(tt)
+        for name in names:
+            a = np.asarray(sig.channels.get(name, np.full(n, np.nan)), dtype=float)
+            chans.setdefault(name, []).append(a)
+        seglist = list(getattr(sig, "segments", None) or [(0, n)])
+        for a, b in seglist:
+            segs.append((int(a) + n0, int(b) + n0))
+        hold.append(np.full(n, bool(is_ho)))
+        dt = np.median(np.diff(t)) if n > 1 else 1.0
+        offset = tt[-1] + 10 * dt
+        n0 += n
+    if not times:
+        raise ValueError("diagnose: the recording holds no samples")
+    t = np.concatenate(times)
+    raw_in = {k: np.concatenate(v) for k, v in chans.items()}
+    # split segments further at big time gaps (the data layer does this; be safe)
+    segments = []
+    for a, b in segs:
+        if b - a < 2:
+            continue
+        dt = np.diff(t[a:b])
+        med = np.median(dt)
+        cuts = np.flatnonzero(~(dt <= 5 * med) | (dt <= 0)) + 1 + a
+        edges = [a] + list(cuts) + [b]
+        segments += [(int(x), int(y)) for x, y in zip(edges[:-1], edges[1:]) if y - x >= 2]
+    dts = np.concatenate([np.diff(t[a:b]) for a, b in segments]) if segments else np.array([1.0])
+    fs = 1.0 / float(np.median(dts))
+    jitter = float(np.percentile(np.abs(dts * fs - 1.0), 99)) if len(dts) else 0.0
+    if jitter > 0.1 and not steady:
+        notes.append(f"sampling is irregular (99th percentile of |dt/dt_median - 1| = {jitter:.2f}); "
+                     "filters assume a uniform rate")
+    fc_used, q = choose_filter(fs, fc)
+    dec = Decimator(fs, fc_used, q, segments, steady=steady)
+    if len(dec) == 0:
+        raise ValueError(f"diagnose: no segment is long enough for the filter (need > "
+                         f"{4 * fs / fc_used:.0f} samples at {fs:.4g} Hz)")
+    valid = {k: np.isfinite(v) for k, v in raw_in.items()}
+    raw = {k: _fill(v, valid[k], segments) for k, v in raw_in.items()}
+    ctx = Context(params=params, t=t, segments=segments, fs=fs, dec=dec, have=set(raw), raw=raw, valid=valid,
+                  notes=notes, steady=steady)
+    if len(parts) > 1 and any(h for _, h in parts):
+        ctx.holdout_raw = np.concatenate(hold)
+    else:
+        ctx.holdout_raw = holdout_mask(t, segments, holdout)
+    _derive(ctx)
+    _build_blocks(ctx)
+    _nuisance(ctx)
+    return ctx
+
+
+def _nuisance(ctx: Context) -> None:
+    """Columns fitted in every model but never reported as effects.
+
+    A recording slower than the current loop samples settled currents and voltages: the inductive
+    transient after each command step happens between samples, so the recorded v_q misses ``L di/dt`` and
+    carries the controller's sampling phase. A free ``di_q/dt`` column absorbs that measurement artefact; the
+    inductance is then not identifiable (listed as not checkable). (A ``dv_q/dt`` nuisance would absorb more,
+    but in free motion dv/dt ∝ dω/dt ∝ i_q, which leaves a resistance column only the current noise.)"""
+    if "electrical" not in ctx.blocks or ctx.steady:
+        return
+    bw = ctx.params.drive.current_loop_bandwidth
+    if ctx.fs >= 4.0 * bw:
+        return
+    ctx.nuisance = {"nuis_di_dt": lambda c: {"electrical": c.sig["di_dt"]}}
+    ctx.nuisance_reason = (f"the recording ({ctx.fs:.4g} Hz) is slower than 4 x the current-loop bandwidth "
+                           f"({bw:.4g} Hz): inductive transients happen between samples")
+    ctx.notes.append(f"voltage equation: the L di_q/dt term is fitted freely (sampling nuisance), because "
+                     f"{ctx.nuisance_reason}")
+
+
+def _derive(ctx: Context) -> None:
+    p = ctx.params
+    m, raw, have, segs, t = p.motor, ctx.raw, ctx.have, ctx.segments, ctx.t
+    n = len(t)
+    S = ctx.sig
+    ones = np.ones(n, bool)
+    zero = np.zeros(n)
+    # angle and speed
+    if "position" in have:
+        th = raw["position"].copy()
+        for a, b in segs:
+            d = np.diff(th[a:b])
+            if len(d) and np.max(np.abs(d)) > 0.9 * math.pi:   # wrapped angle
+                th[a:b] = np.unwrap(th[a:b])
+                ctx.notes.append("position was wrapped; unwrapped per segment")
+                break
+        S["theta"] = th
+        ctx.valid["theta"] = ctx.valid["position"]
+    if "position" in have and not ctx.steady:
+        # central differences of the angle: no delay (a drive's velocity is often a backward difference,
+        # half a sample late, which looks like a resistance error in the voltage equation)
+        S["omega"] = _gradient(S["theta"], t, segs)
+        ctx.valid["omega"] = ctx.valid["position"] & np.roll(ctx.valid["position"], 1) & np.roll(ctx.valid["position"], -1)
+        if "velocity" in have:
+            lag = _lag(ctx, raw["velocity"], S["omega"])
+            S["velocity_channel_lag"] = np.array(lag)
+            msg = f"velocity taken from the position channel (central differences)"
+            if abs(lag) > 0.25 / ctx.fs:
+                msg += f"; the velocity channel lags it by {1e3 * lag:.2f} ms"
+            ctx.notes.append(msg)
+    elif "velocity" in have:
+        S["omega"] = raw["velocity"]
+        ctx.valid["omega"] = ctx.valid["velocity"]
+    elif "position" in have:
+        S["omega"] = np.zeros(n)
+        ctx.valid["omega"] = ctx.valid["position"]
+    if "theta" not in S and "omega" in S:
+        th = np.zeros(n)
+        for a, b in segs:
+            w = S["omega"][a:b]
+            th[a:b] = np.concatenate([[0.0], np.cumsum(0.5 * (w[1:] + w[:-1]) * np.diff(t[a:b]))])
+        S["theta"] = th
+        ctx.valid["theta"] = ctx.valid["omega"]
+    S["theta_known"] = np.array(1.0 if "position" in have else 0.0)
+    if "omega" in S:
+        w = S["omega"]
+        S["omega_dot"] = zero.copy() if ctx.steady else _gradient(w, t, segs)
+        fc_s = ctx.dec.fc
+        S["omega_s"] = ctx.dec.lowpass(w, fc_s)
+        if ctx.steady:
+            noise = 0.0
+        else:   # white-noise level in the smoothed speed, from the part above the cut-off
+            hi = w - S["omega_s"]
+            x = 2.0 * fc_s / ctx.fs
+            noise = float(np.std(hi)) * math.sqrt(x / max(1.0 - x, 1e-3))
+        spread = float(np.percentile(np.abs(S["omega_s"]), 90)) if n else 1.0
+        ctx.omega_eps = max(2.0 * noise, 1e-3 * spread, 1e-6)
+    # currents
+    if "current" in have:
+        S["i_q"] = raw["current"]
+        S["di_dt"] = zero.copy() if ctx.steady else _gradient(S["i_q"], t, segs)
+    S["i_d"] = raw["current_d"] if "current_d" in have else zero.copy()
+    ctx.valid.setdefault("i_d", ctx.valid.get("current_d", ones))
+    # temperatures: measured, proxy, or the nominal thermal network driven by the measured current
+    T_w = raw.get("winding_temperature")
+    T_h = raw.get("housing_temperature")
+    if T_w is None and T_h is not None:
+        T_w = T_h
+        ctx.notes.append("winding temperature not recorded: housing temperature used in R(T)")
+    if T_h is None and T_w is not None:
+        T_h = T_w
+        ctx.notes.append("housing temperature not recorded: winding temperature used for the magnet")
+    if T_w is None:
+        if "i_q" in S:
+            T_w, T_h = thermal_response(ctx, p)
+        else:
+            T_w = T_h = np.full(n, p.thermal.initial_winding_temperature)
+    S["T_w"], S["T_h"] = T_w, T_h
+    # voltages
+    bus = raw["bus_voltage"] if "bus_voltage" in have else np.full(n, p.drive.bus_voltage)
+    S["v_max"] = frames.voltage_limit_q(bus, m.winding)
+    if "voltage_q" in have:
+        S["v_q"] = raw["voltage_q"]
+        S["dv_dt"] = zero.copy() if ctx.steady else _gradient(S["v_q"], t, segs)
+        v_d = raw["voltage_d"] if "voltage_d" in have else zero
+        S["headroom"] = np.hypot(S["v_q"], v_d) / np.maximum(S["v_max"], 1e-9)
+    # effective torque constant with the nominal magnet temperature dependence
+    K = m.torque_constant_q * effects.flux_factor(T_h, m.reference_temperature, m.magnet_temperature_coefficient,
+                                                  m.magnet_temperature_enabled)
+    S["K"] = K
+    S["R"] = effects.resistance_at(m.phase_resistance, T_w, m.reference_temperature,
+                                   m.copper_temperature_coefficient, m.resistance_temperature_enabled)
+
+
+def thermal_response(ctx: Context, p: ActuatorParams, extra_heat: np.ndarray | None = None,
+                     T0: tuple[float, float] | None = None, every: int | None = None):
+    """Winding and housing temperature of the two-node network driven by the measured Joule power
+    ``R(T_w)(i_d² + i_q²)`` (+ ``extra_heat`` [W]), per segment (state carried across segments),
+    evaluated every ``every`` raw samples and held in between. Returns raw-rate (T_w, T_h)."""
+    from .. import model
+
+    th, m = p.thermal, p.motor
+    S = ctx.sig
+    n = len(ctx.t)
+    i2 = S["i_q"] ** 2 + S.get("i_d", 0.0) ** 2
+    if every is None:
+        every = max(1, int(ctx.fs / 20.0))      # 20 Hz is plenty for thermal time constants
+    T_w = np.empty(n)
+    T_h = np.empty(n)
+    y1 = (T0[0] if T0 else th.initial_winding_temperature) - th.ambient_temperature
+    y2 = (T0[1] if T0 else th.initial_housing_temperature) - th.ambient_temperature
+    cache: dict[float, tuple] = {}
+    prev_end = None
+    for a, b in ctx.segments:
+        if prev_end is not None:   # gap: let the network relax without power over the gap
+            gap = ctx.t[a] - ctx.t[prev_end - 1]
+            if gap > 0:
+                p11, p12, p21, p22, *_ = model._thermal_matrices(
+                    th.winding_to_housing_resistance, th.housing_to_ambient_resistance,
+                    th.winding_heat_capacity, th.housing_heat_capacity, gap, model._ScalarOps)
+                y1, y2 = p11 * y1 + p12 * y2, p21 * y1 + p22 * y2
+        for k0 in range(a, b, every):
+            k1 = min(k0 + every, b)
+            T_w[k0:k1] = y1 + th.ambient_temperature
+            T_h[k0:k1] = y2 + th.ambient_temperature
+            h = float(ctx.t[min(k1, b - 1)] - ctx.t[k0]) if k1 < b else float(ctx.t[b - 1] - ctx.t[k0]) + 1.0 / ctx.fs
+            if h <= 0:
+                continue
+            hk = round(h, 9)
+            mats = cache.get(hk)
+            if mats is None:
+                mats = model._thermal_matrices(th.winding_to_housing_resistance, th.housing_to_ambient_resistance,
+                                               th.winding_heat_capacity, th.housing_heat_capacity, h,
+                                               model._ScalarOps)
+                cache[hk] = mats
+            p11, p12, p21, p22, G1, G2, *_ = mats
+            R = effects.resistance_at(m.phase_resistance, y1 + th.ambient_temperature, m.reference_temperature,
+                                      m.copper_temperature_coefficient, m.resistance_temperature_enabled)
+            P = R * float(np.mean(i2[k0:k1]))
+            if extra_heat is not None:
+                P += float(np.mean(extra_heat[k0:k1]))
+            y1, y2 = p11 * y1 + p12 * y2 + G1 * P, p21 * y1 + p22 * y2 + G2 * P
+        prev_end = b
+    return T_w, T_h
+
+
+def stuck_mask(ctx: Context, window: float | None = None) -> np.ndarray:
+    """Raw samples where the rotor does not move: the angle stays within about one encoder count (or
+    three noise levels) over ``window`` seconds (default max(20 ms, 5/fc)) centred on the sample."""
+    from scipy.ndimage import maximum_filter1d, minimum_filter1d
+
+    n = len(ctx.t)
+    out = np.zeros(n, bool)
+    if "theta" not in ctx.sig or ctx.steady:
+        return out
+    th = ctx.sig["theta"]
+    d = np.abs(np.diff(th))
+    nz = d[d > 1e-12]
+    quantum = float(np.percentile(nz, 5)) if len(nz) > 10 else 0.0
+    d2 = np.diff(th, 2)
+    noise = 1.4826 * float(np.median(np.abs(d2 - np.median(d2)))) / math.sqrt(6.0) if len(d2) > 10 else 0.0
+    tol = max(1.5 * quantum, 3.0 * noise, 1e-9)
+    if window is None:
+        window = max(0.02, 5.0 / ctx.dec.fc)
+    size = max(3, int(round(window * ctx.fs)) | 1)
+    for a, b in ctx.segments:
+        x = th[a:b]
+        rng = maximum_filter1d(x, size, mode="nearest") - minimum_filter1d(x, size, mode="nearest")
+        out[a:b] = rng <= tol
+    return out
+
+
+def _build_blocks(ctx: Context) -> None:
+    p, S, have = ctx.params, ctx.sig, ctx.have
+    m, e, N = p.motor, p.effects, p.gear.gear_ratio
+    n = len(ctx.t)
+    ones = np.ones(n, bool)
+    if "i_q" in S and "omega" in S:
+        w, ws = S["omega"], S["omega_s"]
+        tau_f = effects.friction_basis(ws, e.stribeck_velocity, ctx.omega_eps) @ np.array(
+            [e.coulomb_friction, e.friction_asymmetry, e.stribeck_friction])
+        tau_cog = effects.cogging_torque(S["theta"], e.cogging_order, e.cogging_cos, e.cogging_sin) \
+            if e.cogging_order and len(e.cogging_cos) else np.zeros(n)
+        if "torque" in have:
+            tau_ext = ctx.raw["torque"]
+            ext_ok = ctx.valid["torque"]
+        else:
+            tau_ext = effects.position_load_torque_out(S["theta"] / N, p.load.load_torque, p.load.gravity_torque,
+                                                       p.load.gravity_phase, p.load.spring_stiffness,
+                                                       p.load.spring_zero)
+            tau_ext = tau_ext + np.zeros(n)
+            ext_ok = ones
+            if "load_torque" in have:
+                tau_ext = tau_ext + ctx.raw["load_torque"]
+                ext_ok = ctx.valid["load_torque"]
+        y = S["K"] * S["i_q"] - m.rotor_inertia * S["omega_dot"] - m.viscous_damping * w - tau_f - tau_cog \
+            - tau_ext / N
+        ok = ctx.valid["current"] & ctx.valid["omega"] & ext_ok
+        # stuck (no motion at all for a while): the friction force is then anything up to breakaway, so those
+        # samples say nothing. Slow but moving samples stay: dropping them by a speed threshold would select
+        # angles (cogging wells) and bias every angle-dependent term.
+        rest = stuck_mask(ctx)
+        excluded = 0
+        if not ctx.steady and 0 < rest.mean() < 0.8:
+            grow = max(1, int(ctx.fs / ctx.dec.fc))
+            rest = np.convolve(rest.astype(float), np.ones(2 * grow + 1), "same") > 0
+            excluded = int((rest & ok).sum())
+            ok = ok & ~rest
+        elif rest.mean() >= 0.8:
+            ctx.notes.append(f"rotor at rest in {100 * rest.mean():.0f}% of samples: friction is not identifiable")
+        S["rest"] = rest.astype(float)
+        ctx.blocks["mechanical"] = Block("mechanical", ctx.dec.apply(y), ctx.dec.mask(ok), UNITS["mechanical"],
+                                         ctx.dec.lowpass(y), ["current", "velocity|position"], excluded)
+    if "i_q" in S and "omega" in S and "v_q" in S:
+        y = S["v_q"] - S["R"] * S["i_q"] - m.q_inductance * S["di_dt"] - S["K"] * S["omega"] \
+            - m.pole_pairs * S["omega"] * m.q_inductance * S["i_d"]
+        ok = ctx.valid["voltage_q"] & ctx.valid["current"] & ctx.valid["omega"] & ctx.valid["i_d"]
+        ctx.blocks["electrical"] = Block("electrical", ctx.dec.apply(y), ctx.dec.mask(ok), UNITS["electrical"],
+                                         ctx.dec.lowpass(y), ["voltage_q", "current", "velocity|position"])
+
+
+# -- statistics -----------------------------------------------------------------------------------
+
+def integrated_autocorrelation_time(r: np.ndarray, max_lag: int = 200) -> float:
+    """τ_int = 1 + 2 Σ ρ_k (Sokal window: stop at the first lag with ρ_k < 0.05): samples per
+    independent sample of a coloured residual. ``n_eff = n / τ_int``."""
+    r = np.asarray(r, float)
+    r = r - r.mean()
+    n = len(r)
+    if n < 8 or not np.any(r):
+        return 1.0
+    L = min(max_lag, n // 4)
+    f = np.fft.rfft(r, 2 * n)
+    ac = np.fft.irfft(f * np.conj(f))[: L + 1]
+    ac = ac / ac[0]
+    tau = 1.0
+    for k in range(1, L + 1):
+        if ac[k] < 0.05:
+            break
+        tau += 2.0 * ac[k]
+    return float(tau)
+
+
+@dataclass
+class Fit:
+    """Weighted least-squares fit of a set of columns on the equation blocks."""
+
+    keys: list[str]
+    beta: np.ndarray
+    cov: np.ndarray
+    rss: dict[str, float]            #: per block, training, unweighted
+    n: dict[str, int]
+    n_eff: dict[str, float]
+    resid: dict[str, np.ndarray]     #: per block, over ALL decimated samples (NaN where invalid)
+    weights: dict[str, float]
+
+    def coef(self) -> dict[str, float]:
+        return dict(zip(self.keys, self.beta))
+
+
+def fit_columns(ctx: Context, cols: dict[str, dict[str, np.ndarray]], keys: list[str],
+                weights: dict[str, float], blocks: list[str] | None = None) -> Fit:
+    """Stacked weighted least squares ``w_e y_e ≈ w_e X_e β`` over the blocks (training rows only).
+
+    ``cols[key][eq]`` is a decimated column (absent for an equation it does not enter). Returns
+    residuals on every decimated sample so held-out errors follow without refitting.
+    """
+    blocks = blocks or list(ctx.blocks)
+    ho = ctx.holdout_dec
+    Xs, ys, parts = [], [], []
+    for eq in blocks:
+        B = ctx.blocks[eq]
+        rows = B.rows(ho, "train")
+        w = weights[eq]
+        X = np.zeros((int(rows.sum()), len(keys)))
+        for j, k in enumerate(keys):
+            c = cols[k].get(eq)
+            if c is not None:
+                X[:, j] = c[rows]
+        Xs.append(w * X)
+        ys.append(w * B.target[rows])
+        parts.append((eq, rows))
+    X = np.vstack(Xs) if Xs else np.zeros((0, len(keys)))
+    y = np.concatenate(ys) if ys else np.zeros(0)
+    if keys:
+        scale = np.sqrt((X ** 2).sum(axis=0))
+        scale[scale == 0] = 1.0
+        Xn = X / scale
+        beta_n, *_ = np.linalg.lstsq(Xn, y, rcond=1e-10)
+        beta = beta_n / scale
+    else:
+        beta = np.zeros(0)
+        Xn, scale = X, np.ones(0)
+    rss, nn, neff, resid = {}, {}, {}, {}
+    taus = []
+    for eq, rows in parts:
+        B = ctx.blocks[eq]
+        pred = np.zeros(len(B.target))
+        for j, k in enumerate(keys):
+            c = cols[k].get(eq)
+            if c is not None:
+                pred = pred + beta[j] * c
+        r = B.target - pred
+        r_all = np.where(B.valid, r, np.nan)
+        resid[eq] = r_all
+        rt = r[rows]
+        rss[eq] = float(rt @ rt)
+        nn[eq] = int(rows.sum())
+        tau = integrated_autocorrelation_time(rt)
+        taus.append(tau)
+        neff[eq] = nn[eq] / tau
+    # covariance of β: s² (XᵀX)⁻¹ inflated by the residual's correlation time
+    if keys and len(y) > len(keys):
+        rw = y - X @ beta
+        s2 = float(rw @ rw) / (len(y) - len(keys))
+        tau = float(np.mean(taus)) if taus else 1.0
+        try:
+            cov_n = np.linalg.pinv(Xn.T @ Xn) * s2 * tau
+        except np.linalg.LinAlgError:
+            cov_n = np.full((len(keys), len(keys)), np.inf)
+        cov = cov_n / np.outer(scale, scale)
+    else:
+        cov = np.zeros((len(keys), len(keys)))
+    return Fit(list(keys), beta, cov, rss, nn, neff, resid, dict(weights))
+
+
+def touched(base: Fit, new: Fit, rtol: float = 1e-12) -> list[str]:
+    """Equations whose training residual differs between two fits (where the new columns enter)."""
+    return [eq for eq in new.rss if abs(new.rss[eq] - base.rss.get(eq, 0.0)) > rtol * max(base.rss.get(eq, 0.0), 1e-300)]
+
+
+def delta_bic(base: Fit, new: Fit) -> float:
+    """ΔBIC (positive = the new model is better) with the effective sample count of the new model's
+    residual per block: ``Σ_e n_eff,e ln(RSS0_e/RSS1_e) - Δk ln(Σ n_eff)``, over the equations the
+    difference touches."""
+    gain = 0.0
+    eqs = touched(base, new) or list(new.rss)
+    for eq in eqs:
+        if base.rss.get(eq, 0) > 0 and new.rss[eq] > 0:
+            gain += new.n_eff[eq] * math.log(base.rss[eq] / new.rss[eq])
+    dk = len(new.keys) - len(base.keys)
+    n_tot = max(2.0, sum(new.n_eff[eq] for eq in eqs))
+    return float(gain - dk * math.log(n_tot))
+
+
+def robust_std(x: np.ndarray) -> float:
+    x = x[np.isfinite(x)]
+    if len(x) < 3:
+        return 1.0
+    s = 1.4826 * float(np.median(np.abs(x - np.median(x))))
+    return s if s > 0 else float(np.std(x)) or 1.0
+
+
+def heldout_comparison(ctx: Context, base: Fit, new: Fit, weights: dict[str, float],
+                       chunk_seconds: float | None = None) -> dict[str, Any]:
+    """Held-out error before/after: relative RMS change of the weighted stacked residual and a t-statistic
+    of the per-chunk change in squared error (chunks of contiguous held-out time)."""
+    ho = ctx.holdout_dec
+    tdec = ctx.t_dec
+    d_all, t_all, r0_all, r1_all = [], [], [], []
+    per_eq = {}
+    for eq in (touched(base, new) or list(new.resid)):
+        B = ctx.blocks[eq]
+        rows = B.rows(ho, "holdout")
+        if not rows.any():
+            continue
+        w = weights[eq]
+        r0 = base.resid[eq][rows] * w
+        r1 = new.resid[eq][rows] * w
+        per_eq[eq] = (float(np.sqrt(np.mean((r0 / w) ** 2))), float(np.sqrt(np.mean((r1 / w) ** 2))))
+        d_all.append(r0 ** 2 - r1 ** 2)
+        t_all.append(tdec[rows])
+        r0_all.append(r0)
+        r1_all.append(r1)
+    if not d_all:
+        return {"available": False, "rel": 0.0, "t": 0.0, "per_eq": {}}
+    d = np.concatenate(d_all)
+    tt = np.concatenate(t_all)
+    r0 = np.concatenate(r0_all)
+    r1 = np.concatenate(r1_all)
+    ss0, ss1 = float(r0 @ r0), float(r1 @ r1)
+    rel = 1.0 - math.sqrt(ss1 / ss0) if ss0 > 0 else 0.0
+    # chunks: contiguous time pieces of about chunk_seconds
+    dur = float(tt.max() - tt.min()) if len(tt) else 0.0
+    if chunk_seconds is None:
+        chunk_seconds = max(0.25, dur / 60.0)
+    order = np.argsort(tt, kind="stable")
+    tt, d = tt[order], d[order]
+    cid = np.floor((tt - tt[0]) / chunk_seconds).astype(int)
+    _, inv = np.unique(cid, return_inverse=True)
+    sums = np.bincount(inv, weights=d)
+    if len(sums) >= 4 and np.std(sums) > 0:
+        tstat = float(np.mean(sums) / (np.std(sums, ddof=1) / math.sqrt(len(sums))))
+    else:
+        tstat = 0.0
+    return {"available": True, "rel": rel, "t": tstat, "per_eq": per_eq, "chunks": int(len(sums))}

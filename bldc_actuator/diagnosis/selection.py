@@ -1,0 +1,287 @@
+"""Attribute: forward selection over the named candidate effects, gate first, then rank.
+
+Each round every remaining candidate is fitted together with the effects already accepted (equation
+error, decimated, training part only). Its best form (variant) is picked on the training data. It passes
+the gate only if BOTH
+
+* ``ΔBIC > bic_threshold`` — with the effective sample count of the coloured residual, and
+* the held-out part improves: relative RMS drop > ``min_heldout_gain`` AND the per-chunk change in squared
+  error is significant (t > ``min_heldout_t``).
+
+Among the candidates that pass, the one with the largest held-out improvement is accepted (ranking after
+the gate: a high-ΔBIC but wrong candidate cannot block the right one). Candidates that pass in the same round
+and explain the same part of the residual (fitted contributions correlated > 0.9) are reported as aliases.
+A backward check at the end drops an accepted effect that later ones made redundant.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from .candidates import THERMAL, Candidate, Variant
+from .equation_error import Context, Fit, delta_bic, fit_columns, heldout_comparison, robust_std
+
+
+@dataclass
+class GateConfig:
+    bic_threshold: float = 10.0
+    min_heldout_gain: float = 0.02       #: relative RMS improvement on held-out data
+    min_heldout_t: float = 3.0           #: t-statistic of the per-chunk improvement
+    alias_corr: float = 0.9
+    max_rounds: int = 8
+
+
+@dataclass
+class Evaluation:
+    effect: str
+    variant: Variant
+    added: list[str]
+    fit: Fit
+    dbic: float
+    heldout: dict[str, Any]
+    passed: bool
+    reason: str
+
+    def summary(self) -> dict[str, Any]:
+        return {"effect": self.effect, "form": self.variant.label, "delta_bic": round(self.dbic, 2),
+                "heldout_gain": round(self.heldout.get("rel", 0.0), 5),
+                "heldout_t": round(self.heldout.get("t", 0.0), 2), "passed": self.passed, "reason": self.reason}
+
+
+@dataclass
+class Accepted:
+    effect: str
+    variant: Variant
+    added: list[str]
+    round: int
+    dbic: float
+    heldout: dict[str, Any]
+    evidence: list[str] = field(default_factory=list)
+
+
+@dataclass
+class SelectionResult:
+    accepted: list[Accepted]
+    final_fit: Fit
+    base_fit: Fit
+    cols: dict[str, dict[str, np.ndarray]]
+    weights: dict[str, float]
+    rejected: list[dict[str, Any]]
+    aliases: list[dict[str, Any]]
+    not_checkable: list[dict[str, Any]]
+    rounds: list[list[dict[str, Any]]]
+    removed: list[dict[str, Any]]
+
+
+def _channels_missing(ctx: Context, needs) -> list[str]:
+    out = []
+    for item in needs:
+        if not any(n in ctx.have for n in item.split("|")):
+            out.append(item)
+    return out
+
+
+def checkable(ctx: Context, cand: Candidate, loc: dict) -> tuple[list[Variant] | None, dict | None]:
+    """Variants to test, or a not-checkable record (missing channels / equation / excitation)."""
+    miss = _channels_missing(ctx, cand.needs)
+    if miss:
+        return None, {"effect": cand.name, "reason": f"needs {', '.join(m.replace('|', ' or ') for m in miss)}",
+                      "needs": miss}
+    if cand.name in THERMAL:
+        return [], None
+    if not any(eq in ctx.blocks for eq in cand.equations):
+        return None, {"effect": cand.name, "reason": f"needs the {' or '.join(cand.equations)} equation",
+                      "needs": list(cand.needs)}
+    if any(len(ctx.blocks[eq].valid) and ctx.blocks[eq].valid.sum() < 20 for eq in cand.equations if eq in ctx.blocks):
+        return None, {"effect": cand.name, "reason": "too few valid samples", "needs": []}
+    if ctx.nuisance and cand.name == "inductance_error":
+        return None, {"effect": cand.name, "reason": f"not identifiable: {ctx.nuisance_reason}; needs a "
+                      f"recording at >= 4 x the current-loop bandwidth", "needs": []}
+    if cand.excited is not None:
+        why = cand.excited(ctx)
+        if why:
+            return None, {"effect": cand.name, "reason": f"data does not excite it: {why}", "needs": []}
+    variants = cand.variants(ctx, loc)
+    if not variants:
+        return None, {"effect": cand.name, "reason": "no usable form for this data", "needs": [],
+                      "rejected": True}
+    return variants, None
+
+
+def _weights(ctx: Context, fit: Fit) -> dict[str, float]:
+    ho = ctx.holdout_dec
+    w = {}
+    for eq, B in ctx.blocks.items():
+        r = fit.resid[eq][B.rows(ho, "train")]
+        w[eq] = 1.0 / max(robust_std(r), 1e-12)
+    return w
+
+
+def _contribution(ctx: Context, fit: Fit, cols, keys, weights) -> np.ndarray:
+    """Weighted fitted contribution of ``keys`` on the training rows, stacked over blocks."""
+    ho = ctx.holdout_dec
+    parts = []
+    coef = fit.coef()
+    for eq, B in ctx.blocks.items():
+        rows = B.rows(ho, "train")
+        c = np.zeros(int(rows.sum()))
+        for k in keys:
+            col = cols[k].get(eq)
+            if col is not None:
+                c = c + coef[k] * col[rows]
+        parts.append(weights[eq] * c)
+    return np.concatenate(parts) if parts else np.zeros(0)
+
+
+def _corr(a: np.ndarray, b: np.ndarray) -> float:
+    na, nb = np.linalg.norm(a), np.linalg.norm(b)
+    if na == 0 or nb == 0:
+        return 0.0
+    return float(abs(a @ b) / (na * nb))
+
+
+def forward_select(ctx: Context, loc: dict, lib: dict[str, Candidate], names: list[str], gate: GateConfig,
+                   progress: Callable[[str], None] | None = None) -> SelectionResult:
+    say = progress or (lambda s: None)
+    not_checkable: list[dict] = []
+    early_rejected: list[dict] = []
+    pool: dict[str, list[Variant]] = {}
+    for name in names:
+        cand = lib[name]
+        variants, nc = checkable(ctx, cand, loc)
+        if nc and nc.get("rejected"):
+            why = ("no angle order stands out of the residual's angle-order spectrum (give effects.cogging_order "
+                   "in the parameters to test a known order)" if name == "cogging_torque" else nc["reason"])
+            early_rejected.append({"effect": name, "form": "", "reason": why})
+        elif nc:
+            not_checkable.append(nc)
+        elif variants:
+            pool[name] = variants
+    cols: dict[str, dict[str, np.ndarray]] = {}
+
+    def ensure(v: Variant):
+        for k, b in v.columns.items():
+            if k not in cols:
+                cols[k] = ctx.column(k, b)
+
+    for vs in pool.values():
+        for v in vs:
+            ensure(v)
+    for k, b in ctx.nuisance.items():
+        cols[k] = ctx.column(k, b)
+    keys: list[str] = list(ctx.nuisance)
+    w0 = {eq: 1.0 for eq in ctx.blocks}
+    base = fit_columns(ctx, cols, keys, w0)
+    weights = _weights(ctx, base)
+    base = fit_columns(ctx, cols, keys, weights)
+    nominal = base
+    accepted: list[Accepted] = []
+    aliases: list[dict] = []
+    rounds: list[list[dict]] = []
+    last_eval: dict[str, Evaluation] = {}
+    used_labels: set = set()
+    for rnd in range(gate.max_rounds):
+        evals: list[Evaluation] = []
+        for name, variants in pool.items():
+            done = [a for a in accepted if a.effect == name]
+            tried: list[Evaluation] = []
+            for v in variants:
+                if done and not (v.additive and (name, v.label) not in used_labels):
+                    continue
+                added = [k for k in v.keys if k not in keys]
+                if not added:
+                    continue
+                f = fit_columns(ctx, cols, keys + added, weights)
+                tried.append(Evaluation(name, v, added, f, delta_bic(base, f), {}, False, ""))
+            if not tried:
+                continue
+            # the form is chosen on training data: best ΔBIC, but the simplest among those within the
+            # BIC threshold of the best (a harmonic of a sub-order must not beat the order itself)
+            top = max(e.dbic for e in tried)
+            best = min((e for e in tried if e.dbic >= top - gate.bic_threshold),
+                       key=lambda e: (len(e.added), -e.dbic))
+            best.heldout = heldout_comparison(ctx, base, best.fit, weights)
+            ho = best.heldout
+            if best.dbic <= gate.bic_threshold:
+                best.reason = f"ΔBIC {best.dbic:.1f} <= {gate.bic_threshold:g} (not supported by the training data)"
+            elif not ho.get("available"):
+                best.reason = "no held-out data for this equation"
+            elif ho["rel"] <= gate.min_heldout_gain:
+                best.reason = (f"held-out error {'worse' if ho['rel'] < 0 else 'not better'} "
+                               f"({-100 * ho['rel']:+.2f}% RMS) although ΔBIC {best.dbic:.1f}")
+            elif ho["t"] <= gate.min_heldout_t:
+                best.reason = (f"held-out improvement {100 * ho['rel']:.2f}% not significant "
+                               f"(t = {ho['t']:.1f} <= {gate.min_heldout_t:g})")
+            else:
+                best.passed = True
+                best.reason = f"passed: ΔBIC {best.dbic:.1f}, held-out -{100 * ho['rel']:.2f}% RMS (t = {ho['t']:.1f})"
+            evals.append(best)
+            last_eval[name] = best
+        rounds.append([e.summary() for e in sorted(evals, key=lambda e: -e.dbic)])
+        passing = [e for e in evals if e.passed]
+        if not passing:
+            break
+        # rank by held-out gain; among near-ties (within 2 % of the best gain) the simplest form wins
+        top = max(e.heldout["rel"] for e in passing)
+        near = [e for e in passing if e.heldout["rel"] >= top - max(0.002, 0.02 * top)]
+        win = min(near, key=lambda e: (len(e.added), -e.dbic))
+        say(f"round {rnd + 1}: accepted {win.effect} ({win.variant.label}); {win.reason}")
+        # aliases: other passing candidates explaining the same residual component
+        cw = _contribution(ctx, win.fit, cols, win.added, weights)
+        for e in passing:
+            if e is win or set(e.variant.keys) >= set(win.variant.keys) or set(e.variant.keys) <= set(win.variant.keys):
+                continue     # nested forms (e.g. Coulomb inside asymmetric friction) are not alternatives
+            ce = _contribution(ctx, e.fit, cols, e.added, weights)
+            c = _corr(cw, ce)
+            if c >= gate.alias_corr and e.heldout["rel"] >= 0.5 * win.heldout["rel"]:
+                aliases.append({"effects": [win.effect, e.effect], "correlation": round(c, 3),
+                                "chosen": win.effect,
+                                "heldout_gain": {win.effect: round(win.heldout["rel"], 4),
+                                                 e.effect: round(e.heldout["rel"], 4)}})
+        accepted.append(Accepted(win.effect, win.variant, win.added, rnd + 1, win.dbic, win.heldout))
+        used_labels.add((win.effect, win.variant.label))
+        keys = keys + win.added
+        base = win.fit
+        weights = _weights(ctx, base)
+        base = fit_columns(ctx, cols, keys, weights)
+        last_eval.pop(win.effect, None)
+    # backward check: every accepted effect must still earn its place given the others
+    removed: list[dict] = []
+    changed = True
+    while changed and len(accepted) > 1:
+        changed = False
+        for a in list(accepted):
+            others = [k for k in keys if k not in a.added]
+            f_without = fit_columns(ctx, cols, others, weights)
+            db = delta_bic(f_without, base)
+            ho = heldout_comparison(ctx, f_without, base, weights)
+            if db <= gate.bic_threshold or ho["rel"] <= gate.min_heldout_gain or ho["t"] <= gate.min_heldout_t:
+                accepted.remove(a)
+                keys = others
+                base = fit_columns(ctx, cols, keys, weights)
+                removed.append({"effect": a.effect, "form": a.variant.label,
+                                "reason": f"redundant once the others are in (ΔBIC {db:.1f}, held-out "
+                                          f"{100 * ho['rel']:+.2f}%)"})
+                say(f"backward check: removed {a.effect}")
+                changed = True
+                break
+    rejected = []
+    acc_names = {a.effect for a in accepted}
+    for name, e in last_eval.items():
+        if name in acc_names:
+            continue
+        reason = e.reason
+        al = [x for x in aliases if e.effect in x["effects"] and x["chosen"] != e.effect]
+        if al:
+            reason = f"explains the same residual as {al[0]['chosen']} (aliased); {reason}"
+        rejected.append({"effect": name, "form": e.variant.label, "reason": reason,
+                         "delta_bic": round(e.dbic, 2), "heldout_gain": round(e.heldout.get("rel", 0.0), 5),
+                         "heldout_t": round(e.heldout.get("t", 0.0), 2)})
+    rejected += early_rejected
+    for r in removed:
+        rejected.append({"effect": r["effect"], "form": r["form"], "reason": r["reason"]})
+    return SelectionResult(accepted, base, nominal, cols, weights, rejected, aliases, not_checkable, rounds, removed)
