@@ -22,7 +22,7 @@ SIM = [
     "numpy>=1.24",
     "scipy>=1.10",
     "PyYAML>=6.0",
-    "mcap>=1.1",
+    "mcap>=1.2",
     "mcap-ros2-support>=0.5",
     "matplotlib>=3.6",
 ]
@@ -39,7 +39,7 @@ TEST = [
     "pytest>=7.0",
     "pytest-timeout>=2.1",
     "pytest-xdist>=3.0",
-    "rosbags>=0.9.20",
+    "rosbags>=0.11",
     "colcon-common-extensions>=0.3",
     "PyYAML>=6.0",
 ]
