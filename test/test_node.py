@@ -357,13 +357,15 @@ def test_two_actuators_by_namespace_are_independent(ros_context, ros_executor):
 # -------------------------------------------------------------------------------------------- helpers
 
 
-def test_record_flag_is_stripped_before_rclpy():
-    from bldc_actuator.node import split_record_flag
+def test_own_flags_are_stripped_before_rclpy():
+    from bldc_actuator.node import split_node_flags
 
-    assert split_record_flag(["actuator_node", "--record", "a.mcap", "--ros-args", "-p", "x:=1"]) == \
-        (["actuator_node", "--ros-args", "-p", "x:=1"], "a.mcap")
-    assert split_record_flag(["n", "--record=b.mcap"]) == (["n"], "b.mcap")
-    assert split_record_flag(["n", "--ros-args", "-p", "node.record:=c"]) == (["n", "--ros-args", "-p", "node.record:=c"], None)
+    assert split_node_flags(["actuator_node", "--record", "a.mcap", "--ros-args", "-p", "x:=1"]) == \
+        (["actuator_node", "--ros-args", "-p", "x:=1"], {"record": "a.mcap"})
+    assert split_node_flags(["n", "--record=b.mcap", "--executor", "single"]) == (["n"], {"record": "b.mcap",
+                                                                                       "executor": "single"})
+    assert split_node_flags(["n", "--ros-args", "-p", "node.record:=c"]) == \
+        (["n", "--ros-args", "-p", "node.record:=c"], {})
 
 
 def test_q_axis_layout_labels_match_model_outputs(ros_context, ros_executor):

@@ -62,10 +62,13 @@ def test_bad_parameter_exits_with_a_clear_message(tmp_path):
     assert "Traceback" not in result.stderr
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
-def test_signal_finalizes_the_recording(tmp_path, sig):
+@pytest.mark.parametrize("sig, executor", [(signal.SIGINT, "single"), (signal.SIGTERM, "single"),
+                                           (signal.SIGINT, "events"), (signal.SIGTERM, "events")])
+def test_signal_finalizes_the_recording(tmp_path, sig, executor):
+    if executor == "events":
+        pytest.importorskip("rclpy.experimental", reason="EventsExecutor needs ROS 2 Kilted or newer")
     rec = tmp_path / "sig.mcap"
-    proc = subprocess.Popen([str(venv_script()), "--record", str(rec)], env=env_for(),
+    proc = subprocess.Popen([str(venv_script()), "--record", str(rec), "--executor", executor], env=env_for(),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         # running at real time: wait until a few chunks' worth of time has been simulated
