@@ -15,9 +15,12 @@ step of tau_a/2 at the output. Outputs: ``out/demo.mcap``, ``out/demo.png``, a p
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import os
+import signal
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -179,6 +182,29 @@ def make_player(profile: Profile, actuator_prefix: str, joint_states: str, *, ev
     return ProfilePlayer()
 
 
+@contextlib.contextmanager
+def _ctrl_c_outside_callbacks():
+    """Ctrl-C sets a flag the spin loop polls (a KeyboardInterrupt inside a callback would be logged as a
+    crash by the executor); on leaving, KeyboardInterrupt is raised if it was pressed."""
+    hit = [False]
+    if threading.current_thread() is not threading.main_thread():
+        yield lambda: False
+        return
+
+    def handler(signum, frame):
+        if hit[0]:
+            raise KeyboardInterrupt     # second Ctrl-C: at once
+        hit[0] = True
+
+    previous = signal.signal(signal.SIGINT, handler)
+    try:
+        yield lambda: hit[0]
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if hit[0]:
+        raise KeyboardInterrupt
+
+
 def run_demo(params_preset: str | None, out_dir: Path, *, time_factor: float | None = None,
              plot: bool = True, duration: float = DURATION, quiet: bool = False,
              domain_id: int | None = None) -> dict:
@@ -224,7 +250,10 @@ def run_demo(params_preset: str | None, out_dir: Path, *, time_factor: float | N
         wall0 = time.perf_counter()
         node.start()                     # publishes the state at t = 0 (and starts the timer unless lock-step)
         player.start()                   # the first command; in lock-step it starts the loop
-        executor.spin_until_future_complete(player.done, timeout_sec=120.0)
+        with _ctrl_c_outside_callbacks() as interrupted:
+            deadline = time.monotonic() + 120.0
+            while not player.done.done() and not interrupted() and time.monotonic() < deadline:
+                executor.spin_until_future_complete(player.done, timeout_sec=0.2)
         if not player.done.done():
             raise RuntimeError("demo: the profile did not finish within 120 s wall")
     finally:
@@ -410,6 +439,9 @@ def run(args) -> int:
     except ParameterError as exc:
         print(f"bldc-actuator demo: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print("bldc-actuator demo: interrupted", file=sys.stderr)
+        return 130
     except ModuleNotFoundError as exc:
         print(f"bldc-actuator demo: {exc.name} is not installed (pip install .[wheels])", file=sys.stderr)
         return 1
