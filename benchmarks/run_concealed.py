@@ -81,7 +81,7 @@ def heldout_option() -> str | None:
                              env=_env()).stdout
     except (OSError, subprocess.TimeoutExpired):
         return None
-    for opt in ("--held-out", "--heldout", "--validation", "--holdout"):
+    for opt in ("--holdout-file", "--held-out-file", "--heldout-file", "--held-out", "--heldout", "--validation"):
         if opt in out:
             return opt
     return None
@@ -144,6 +144,8 @@ def main(argv=None) -> int:
     ap.add_argument("--generate-only", action="store_true", help="generate and print the concealment table only")
     ap.add_argument("--timeout", type=float, default=300.0, help="per-case diagnose timeout [s]")
     ap.add_argument("--diagnose-arg", action="append", default=[], help="extra argument passed to diagnose")
+    ap.add_argument("--update-doc", type=Path, nargs="?", const=REPO / "docs" / "benchmark.md",
+                    help="also replace the results block of docs/benchmark.md (between its markers)")
     args = ap.parse_args(argv)
 
     def log(msg):
@@ -207,8 +209,28 @@ def main(argv=None) -> int:
                           f"{json.dumps(d.get('evidence'), default=str)[:400]}")
         md.append("")
     (args.out / "concealed.md").write_text("\n".join(md))
+    if args.update_doc:
+        update_doc(args.update_doc, meta, summary, scores, truths, cases)
     log(f"wrote {args.out / 'concealed.md'} and {args.out / 'concealed.json'}")
     return 1 if failed else 0
+
+
+BEGIN, END = "<!-- concealed-results:begin -->", "<!-- concealed-results:end -->"
+
+
+def update_doc(path: Path, meta, summary, scores, truths, cases) -> None:
+    """Replace the block between the markers of ``path`` with the latest summary, table and concealment."""
+    text = path.read_text()
+    if BEGIN not in text or END not in text:
+        raise SystemExit(f"{path}: markers {BEGIN} / {END} not found")
+    block = "\n".join([BEGIN, "", f"Run of {meta['date']} (git {meta['git']}, generator {meta['generator']}, "
+                        f"{meta['cpus']} CPUs{', quick subset' if meta['quick'] else ''}):", "", "```",
+                        scoring.summary_text(summary), "```", "", scoring.markdown_table(scores, truths), "",
+                        "Concealment (training recordings):", "", "```", concealment_table(cases, truths), "```", "",
+                        END])
+    head, rest = text.split(BEGIN, 1)
+    path.write_text(head + block + rest.split(END, 1)[1])
+    print(f"updated {path}")
 
 
 def _git_head() -> str:

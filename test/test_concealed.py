@@ -220,7 +220,7 @@ def test_quick_subset_one_effect_one_null(tmp_path):
 
     out = tmp_path / "results"
     proc = subprocess.run([sys.executable, str(REPO / "benchmarks" / "run_concealed.py"), "--quick",
-                           "--data", str(tmp_path / "data"), "--out", str(out)],
+                           "--data", str(tmp_path / "data"), "--out", str(out), "--diagnose-arg=--no-plots"],
                           capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     res = json.loads((out / "concealed.json").read_text())

@@ -156,6 +156,8 @@ class CaseScore:
     snr: float | None = None
     channel: str | None = None
     wall_time_s: float | None = None
+    diagnose_time_s: float | None = None     #: the report's own timing.total (no interpreter start-up)
+    verdict_text: str | None = None
     error: str | None = None
     false_positive_detail: list[dict] = field(default_factory=list)
 
@@ -188,7 +190,10 @@ def score_case(truth: dict, report: dict | None, nominal_flat: dict, *, wall_tim
     missed = [e for e in hidden if e not in names]
     fps = [e for e in names if e not in hidden]
     cs = CaseScore(truth["case"], hidden, names, missed, fps, snr=conc.get("snr"), channel=conc.get("channel"),
-                   wall_time_s=wall_time, error=error)
+                   wall_time_s=wall_time, error=error, verdict_text=report.get("verdict"))
+    timing = report.get("timing")
+    if isinstance(timing, dict):
+        cs.diagnose_time_s = _num(timing.get("total"))
     for f in findings:
         if f["effect"] in fps:
             cs.false_positive_detail.append({k: f.get(k) for k in ("effect", "parameters", "evidence", "held_out")})
@@ -218,6 +223,7 @@ def summarise(scores: list[CaseScore]) -> dict:
     improvements = [1.0 - e.held_out_after / e.held_out_before for s in effect_cases for e in s.effects
                     if e.found and e.held_out_before and e.held_out_after is not None and e.held_out_before > 0]
     times = [s.wall_time_s for s in scores if s.wall_time_s is not None]
+    internal = [s.diagnose_time_s for s in scores if s.diagnose_time_s is not None]
     return {
         "cases": len(scores),
         "effect_cases": len(effect_cases),
@@ -235,6 +241,7 @@ def summarise(scores: list[CaseScore]) -> dict:
         "errors": sum(s.error is not None for s in scores),
         "mean_wall_time_s": sum(times) / len(times) if times else None,
         "max_wall_time_s": max(times) if times else None,
+        "mean_diagnose_time_s": sum(internal) / len(internal) if internal else None,
     }
 
 
@@ -274,13 +281,14 @@ def rows(scores: list[CaseScore], truths: dict[str, dict]) -> list[list[str]]:
             "; ".join(params) or "–",
             "; ".join(errs) or "–",
             "; ".join(held) or "–",
-            _fmt(s.wall_time_s, ".1f"),
+            _fmt(s.wall_time_s, ".1f") + (f" ({s.diagnose_time_s:.1f})" if s.diagnose_time_s is not None else ""),
         ])
     return out
 
 
 HEADER = ["case", "hidden effect(s)", "effect/noise RMS (channel) = SNR", "named by diagnose", "verdict",
-          "main parameter true→est", "rel. error", "held-out before→after", "time [s]"]
+          "main parameter true→est", "rel. error", "held-out before→after",
+          "wall (internal) time [s]"]
 
 
 def text_table(scores, truths) -> str:
@@ -314,8 +322,9 @@ def summary_text(summary: dict) -> str:
             f"main-parameter error: mean {pct(summary['mean_parameter_error'])}, median "
             f"{pct(summary['median_parameter_error'])} over {summary['parameters_scored']} scored parameters; "
             f"mean held-out improvement of the named hidden effects: {pct(summary['mean_held_out_improvement'])}\n"
-            f"wall time per case: mean {_fmt(summary['mean_wall_time_s'], '.1f')} s, max "
-            f"{_fmt(summary['max_wall_time_s'], '.1f')} s; errors: {summary['errors']}")
+            f"wall time per case (subprocess, incl. start-up): mean {_fmt(summary['mean_wall_time_s'], '.1f')} s, max "
+            f"{_fmt(summary['max_wall_time_s'], '.1f')} s; diagnose's own total: mean "
+            f"{_fmt(summary.get('mean_diagnose_time_s'), '.1f')} s; errors: {summary['errors']}")
 
 
 def load_json(path) -> Any:
