@@ -35,7 +35,7 @@ sys.path.insert(0, str(REPO))
 from benchmarks.concealed import cases as C  # noqa: E402
 from benchmarks.concealed import scoring  # noqa: E402
 
-GENERATOR_SOURCES = ("truth.py", "truth_kernel.c", "excitation.py", "cases.py")
+GENERATOR_SOURCES = ("truth.py", "truth_kernel.c", "excitation.py", "cases.py", "oracle.py")
 
 
 def generator_hash() -> str:
@@ -121,14 +121,18 @@ def run_case(case_dir: Path, out_dir: Path, held_opt: str | None, timeout: float
 
 def concealment_table(cases, truths) -> str:
     """Effect RMS vs noise RMS per channel, from the noise-free and effect-free twins."""
-    lines = [f"{'case':30s} {'channel':9s} {'effect RMS':>11s} {'noise RMS':>10s} {'SNR':>6s}   "
-             f"{'(current: effect / noise A)':>28s}  {'(voltage_q: effect / noise V)':>29s}"]
+    lines = [f"{'case':28s} {'channel':9s} {'effect RMS':>11s} {'noise RMS':>10s} {'SNR':>5s}  "
+             f"{'current: effect / noise A':>25s}  {'voltage_q: effect / noise V':>27s}  oracle (form known): estimate, error"]
     for case in cases:
-        c = truths[case.name]["concealment"]
+        t = truths[case.name]
+        c = t["concealment"]
         unit = "A" if c["channel"] == "current" else "V"
-        lines.append(f"{case.name:30s} {c['channel']:9s} {c['effect_rms']:9.4f} {unit} {c['noise_rms']:8.4f} {unit} "
-                     f"{c['snr']:6.2f}   {c['current']['effect_rms']:12.4f} / {c['current']['noise_rms']:.4f}   "
-                     f"{c['voltage_q']['effect_rms']:14.4f} / {c['voltage_q']['noise_rms']:.4f}")
+        o = t.get("oracle") or {}
+        ora = (f"{o['parameter']} {o['estimate']:.4g} (true {o['true']:.4g}, {100 * o['rel_error']:.0f} %)"
+               if o.get("estimate") is not None else "–")
+        lines.append(f"{case.name:28s} {c['channel']:9s} {c['effect_rms']:9.4f} {unit} {c['noise_rms']:8.4f} {unit} "
+                     f"{c['snr']:5.2f}  {c['current']['effect_rms']:11.4f} / {c['current']['noise_rms']:.4f}  "
+                     f"{c['voltage_q']['effect_rms']:13.4f} / {c['voltage_q']['noise_rms']:.4f}  {ora}")
     return "\n".join(lines)
 
 

@@ -232,3 +232,17 @@ def test_quick_subset_one_effect_one_null(tmp_path):
     assert "coulomb_friction" in coulomb["found"], proc.stdout[-3000:]
     err = coulomb["effects"][0]["rel_error"]
     assert err is not None and err < 0.5, coulomb
+
+
+@pytest.mark.parametrize("name", ["cogging", "electrical_ripple", "magnet_thermal"])
+def test_hidden_effect_is_identifiable_by_an_oracle(name):
+    """Concealed is not absent: an estimator told the effect's form recovers its size from the recorded
+    channels alone (the hardest ones: N_c = 252 cogging, order-p ripple, −0.12 %/K flux)."""
+    from benchmarks.concealed import oracle
+
+    case = C.get_case(name)
+    rec, = T.simulate([C.truth_specs(case)[0]], [case.train.build()])
+    main, est = oracle.estimate(name, {"effects": list(case.effects), "truth": case.truth,
+                                       "nominal_overrides": case.nominal}, rec)
+    true = case.truth[case.effects[0]][main]
+    assert est == pytest.approx(true, rel=0.15)

@@ -366,6 +366,16 @@ def generate(cases, outdir: Path, *, progress: Callable[[str], None] | None = No
         full = by[(case.name, "train")]
         conc = concealment(case, full, by.get((case.name, "no_effect"), full), by[(case.name, "no_noise")])
         tr_spec, ho_spec = truth_specs(case)
+        ora = None
+        if not case.is_null:
+            from .oracle import estimate
+
+            main = next(iter(case.truth[case.effects[0]]))
+            true_value = case.truth[case.effects[0]][main]
+            _, est = estimate(case.name, {"effects": list(case.effects), "truth": case.truth,
+                                          "nominal_overrides": case.nominal}, full)
+            ora = {"effect": case.effects[0], "parameter": main, "true": true_value, "estimate": est,
+                   "rel_error": None if est is None else abs(est - true_value) / abs(true_value)}
         truth = {
             "case": case.name,
             "effects": list(case.effects),
@@ -375,6 +385,7 @@ def generate(cases, outdir: Path, *, progress: Callable[[str], None] | None = No
             "drive_changes": case.drive,
             "nominal_overrides": case.nominal,
             "concealment": conc,
+            "oracle": ora,
             "train": {"excitation": case.train.kind, "duration_s": case.train.duration, "seed": tr_spec.seed},
             "heldout": {"excitation": case.heldout.kind, "duration_s": case.heldout.duration, "seed": ho_spec.seed},
             "sensors": {"current_noise_per_phase_A": SENSORS.current_noise, "encoder_bits": SENSORS.encoder_bits,
