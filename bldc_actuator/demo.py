@@ -172,7 +172,8 @@ def make_player(profile: Profile, actuator_prefix: str, joint_states: str, *, ev
 
         def _watch(self) -> None:           # lock-step safety net: a lost message must not stall the loop
             now = time.monotonic()
-            if self.last_t == self._progress[1] and every_state and not self.done.done() and now - self._progress[0] > 1.0:
+            stalled = self.last_t == self._progress[1] and now - self._progress[0] > 1.0
+            if stalled and every_state and not self.done.done():
                 self.get_logger().warning("no joint_states for 1 s: re-sending the command")
                 self.send(max(self.last_t, 0))
                 self._progress = (now, self.last_t)
@@ -323,6 +324,10 @@ def summarize_demo(rec, profile: Profile, wall: float, lock_step: bool, time_fac
     est0, _ = steady_speed_analytic(params, float(s["T_w"][m0][-1]), float(s["T_h"][m0][-1]), 0.0, i_ref)
     est1, _ = steady_speed_analytic(params, float(s["T_w"][m1][-1]), float(s["T_h"][m1][-1]), tau_load, i_ref)
     dt = float(np.median(np.diff(s["t_q"]))) if len(s["t_q"]) > 1 else 0.0
+
+    def saturated(w):
+        return float(np.mean(s["voltage_saturated"][(s["t_q"] >= w[0]) & (s["t_q"] <= w[1])]))
+
     replayed = resimulate(rec)
     dv = max(abs(o["velocity_out"] - m.velocity[0]) for (_, o), (_, m) in zip(replayed, rec.topics["/joint_states"]))
     levels = [as_level(st.level) for _, a in rec.topics["/diagnostics"] for st in a.status]
@@ -337,11 +342,12 @@ def summarize_demo(rec, profile: Profile, wall: float, lock_step: bool, time_fac
         "message_count": info["message_count"],
         "topics": {k: (v["type"], v["count"], v["rate_hz"]) for k, v in info["topics"].items()},
         "gear_ratio": params.gear.gear_ratio, "tau_a": profile.meta["tau_a"], "tau_load": tau_load,
-        "steady_no_load": (v0, est0, ripple0, float(np.mean(s["voltage_saturated"][(s["t_q"] >= STEADY_NO_LOAD[0]) & (s["t_q"] <= STEADY_NO_LOAD[1])]))),
-        "steady_load": (v1, est1, ripple1, float(np.mean(s["voltage_saturated"][(s["t_q"] >= STEADY_LOAD[0]) & (s["t_q"] <= STEADY_LOAD[1])]))),
+        "steady_no_load": (v0, est0, ripple0, saturated(STEADY_NO_LOAD)),
+        "steady_load": (v1, est1, ripple1, saturated(STEADY_LOAD)),
         "peak_T_winding": float(np.max(s["T_w"])), "peak_T_housing": float(np.max(s["T_h"])),
         "start_T_winding": float(s["T_w"][0]),
-        "saturation_s": float(np.sum(s["voltage_saturated"][1:]) * dt), "peak_i_q": float(np.max(np.abs(s["i_q"]))),
+        "saturation_s": float(np.sum(s["voltage_saturated"][1:]) * dt),
+        "peak_i_q": float(np.max(np.abs(s["i_q"]))),
         "current_limit": params.drive.current_limit,
         "diagnostics_levels": {lv: levels.count(lv) for lv in sorted(set(levels))},
         "replay_max_dv": dv, "replay_states": len(replayed),
@@ -360,7 +366,8 @@ def print_summary(s: dict) -> None:
     v0, e0, r0, sat0 = s["steady_no_load"]
     v1, e1, r1, sat1 = s["steady_load"]
     out("  physics (output side):\n")
-    out(f"    torque steps +-{s['tau_a']:.3f} N*m (25 % of the current limit), load step {s['tau_load']:.3f} N*m at 3.4 s\n")
+    out(f"    torque steps +-{s['tau_a']:.3f} N*m (25 % of the current limit), "
+        f"load step {s['tau_load']:.3f} N*m at 3.4 s\n")
     out(f"    steady speed, no load (at {STEADY_NO_LOAD[1]} s): {v0:.6f} rad/s; analytic voltage-limited steady "
         f"state {e0:.6f} rad/s ({(v0 / e0 - 1) * 100:+.2g} %; window ripple {r0:.2g} rad/s, saturated {sat0:.0%})\n")
     out(f"    steady speed, load {s['tau_load']:.3f} N*m (at {STEADY_LOAD[1]} s): {v1:.6f} rad/s; analytic "
@@ -391,7 +398,8 @@ def plot_demo(rec, profile: Profile, summary: dict, png: Path) -> Path:
     ax[0].set_ylabel("output torque [N*m]")
     ax[1].plot(s["t"], s["velocity"], label="velocity", lw=0.8)
     for (w, (_, est, _, _)) in ((STEADY_NO_LOAD, summary["steady_no_load"]), (STEADY_LOAD, summary["steady_load"])):
-        ax[1].hlines(est, *w, colors="k", linestyles="--", label="analytic steady speed" if w == STEADY_NO_LOAD else None)
+        ax[1].hlines(est, *w, colors="k", linestyles="--",
+                     label="analytic steady speed" if w == STEADY_NO_LOAD else None)
     ax[1].set_ylabel("output speed [rad/s]")
     ax[2].plot(s["t_q"], s["i_q"], label="i_q", lw=0.8)
     ax[2].plot(s["t_q"], s["i_q_ref"], label="i_q_ref", lw=0.8, ls="--")

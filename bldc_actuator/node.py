@@ -566,7 +566,8 @@ usage: actuator_node [--record PATH] [--executor events|single] [--ros-args --pa
 Virtual BLDC actuator node (bldc_actuator). Every model parameter has a default: it runs without a
 parameter file. --record PATH records commands, outputs and parameters to an MCAP file (same as
 -p node.record:=PATH). --executor: single (SingleThreadedExecutor, default) or events (rclpy's
-experimental EventsExecutor, Kilted+: less CPU, faster lock-step). Stops on Ctrl-C / SIGTERM, or after node.max_sim_time seconds of simulation.
+experimental EventsExecutor, Kilted+: less CPU, faster lock-step). Stops on Ctrl-C / SIGTERM, or after
+node.max_sim_time seconds of simulation.
 
 Topics (relative to the namespace; ~ = the node's private namespace):
   in : ~/current_command, ~/torque_command (std_msgs/Float64), ~/commands (std_msgs/Float64MultiArray),

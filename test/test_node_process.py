@@ -101,7 +101,8 @@ def test_exception_in_the_node_still_finalizes_the_recording(tmp_path):
         "    if calls[0] > 100: raise ZeroDivisionError('injected fault')\n"
         "    return orig(self, dt)\n"
         "model.Actuator.step_ns = broken\n"
-        f"sys.exit(node.main(['actuator_node', '--record', {str(rec)!r}, '--ros-args', '-p', 'node.time_factor:=0.0']))\n"
+        f"sys.exit(node.main(['actuator_node', '--record', {str(rec)!r},\n"
+        "                    '--ros-args', '-p', 'node.time_factor:=0.0']))\n"
     )
     result = subprocess.run([sys.executable, "-c", code], env=env_for(), capture_output=True, text=True, timeout=60)
     assert result.returncode != 0 and "injected fault" in result.stderr
