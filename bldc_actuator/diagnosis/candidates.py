@@ -119,7 +119,7 @@ def col_harmonic(order, k, which, current_weighted=False):
         b = effects.angle_harmonic_basis(ctx.sig["theta"], order, k)[:, 2 * (k - 1) + (0 if which == "cos" else 1)]
         b = b * resolvable(ctx, k * order)
         if current_weighted:
-            b = b * ctx.sig["i_q"]
+            b = b * ctx.sig["i_col"]
         return {"mechanical": b}
     return build
 
@@ -138,7 +138,7 @@ def col_kt(equations):
         S = ctx.sig
         out = {}
         if "mechanical" in equations:
-            out["mechanical"] = -S["K"] * S["i_q"]
+            out["mechanical"] = -S["K"] * S["i_col"]
         if "electrical" in equations and "v_q" in S:
             out["electrical"] = S["K"] * S["omega"]
         return out
@@ -152,7 +152,7 @@ def col_inertia(ctx):
 def col_r_err(ctx):
     m = ctx.params.motor
     S = ctx.sig
-    return {"electrical": S["i_q"] * S["R"] / m.phase_resistance}
+    return {"electrical": S["i_col"] * S["R"] / m.phase_resistance}
 
 
 def col_l_err(ctx):
@@ -162,14 +162,14 @@ def col_l_err(ctx):
 def col_r_temp(ctx):
     m = ctx.params.motor
     S = ctx.sig
-    return {"electrical": m.phase_resistance * (S["T_w"] - m.reference_temperature) * S["i_q"]}
+    return {"electrical": m.phase_resistance * (S["T_w"] - m.reference_temperature) * S["i_col"]}
 
 
 def col_magnet(ctx):
     m = ctx.params.motor
     S = ctx.sig
     dT = S["T_h"] - m.reference_temperature
-    out = {"mechanical": -m.torque_constant_q * dT * S["i_q"]}
+    out = {"mechanical": -m.torque_constant_q * dT * S["i_col"]}
     if "v_q" in S:
         out["electrical"] = m.torque_constant_q * dT * S["omega"]
     return out
@@ -177,12 +177,12 @@ def col_magnet(ctx):
 
 def col_saturation(ctx):
     S = ctx.sig
-    return {"mechanical": S["K"] * S["i_q"] * np.abs(S["i_q"])}
+    return {"mechanical": S["K"] * S["i_col"] * np.abs(S["i_col"])}
 
 
 def col_dead_time(ctx):
     S = ctx.sig
-    i = S["i_q"]
+    i = S["i_col"]
     eps = max(3.0 * float(np.std(i - ctx.dec.lowpass(i))), 1e-3 * float(np.percentile(np.abs(i), 90)), 1e-6)
     return {"electrical": _smooth_sign(ctx.dec.lowpass(i), eps)}
 
@@ -740,3 +740,53 @@ def evidence(effect: str, variant: Variant, loc: dict, extra: dict) -> list[str]
         out.append(f"selection: ΔBIC {extra['dbic']:.1f}; held-out residual RMS -{100 * ho.get('rel', 0):.1f}% "
                    f"(t = {ho.get('t', 0):.1f})")
     return out
+
+
+# ------------------------------------------------------------------------------------- plausibility
+
+def implausible(cand: Candidate, coef, cov, keys, variant: Variant, ctx) -> str | None:
+    """A reason when the fitted parameters are physically implausible (a fit that makes the torque constant
+    vanish or the resistance negative explains noise, not physics), else None."""
+    try:
+        pars = cand.to_params(np.asarray(coef), np.asarray(cov), keys, variant, ctx)
+    except Exception:  # noqa: BLE001 - a mapping that cannot even be evaluated is not plausible
+        return "its parameters cannot be evaluated"
+    p = ctx.params
+    m = p.motor
+
+    def val(name):
+        x = pars.get(name, {})
+        return x.get("value"), x.get("sd", 0.0) or 0.0
+
+    checks = []
+    v, sd = val("ratio_to_nominal")
+    if v is not None:
+        checks.append((0.2 <= v <= 5.0, f"torque constant ratio {v:.3g} outside [0.2, 5]"))
+    for name, nominal, lo, hi in (("rotor_inertia", m.rotor_inertia, 0.1, 20.0),
+                                  ("phase_resistance", m.phase_resistance, 0.2, 5.0),
+                                  ("q_inductance", m.q_inductance, 0.2, 5.0)):
+        v, sd = val(name)
+        if v is not None:
+            checks.append((lo * nominal <= v <= hi * nominal,
+                           f"{name} {v:.3g} outside [{lo:g}, {hi:g}] x nominal {nominal:.3g}"))
+    for name in ("viscous_damping", "coulomb_friction", "stribeck_friction", "dead_time_voltage"):
+        v, sd = val(name)
+        if v is not None and isinstance(v, float):
+            checks.append((v + 3.0 * sd >= 0.0, f"{name} {v:.3g} < 0"))
+    v, sd = val("copper_temperature_coefficient")
+    if v is not None:
+        checks.append((-0.001 <= v <= 0.01, f"copper coefficient {v:.3g}/K outside [-0.001, 0.01]"))
+    v, sd = val("magnet_temperature_coefficient")
+    if v is not None:
+        checks.append((-0.01 <= v <= 0.002, f"magnet coefficient {v:.3g}/K outside [-0.01, 0.002]"))
+    v, sd = val("delay")
+    if v is not None:
+        checks.append((abs(v) <= 2e-3, f"delay {1e3 * v:.3g} ms beyond 2 ms"))
+    v, sd = val("saturation_coefficient")
+    if v is not None:
+        i_max = float(np.percentile(np.abs(ctx.dsig("i_q")), 99.5))
+        checks.append((-0.05 <= v * i_max <= 0.6, f"saturation {100 * v * i_max:.3g}% at {i_max:.3g} A"))
+    for ok, why in checks:
+        if not ok:
+            return f"implausible fitted value: {why}"
+    return None

@@ -22,7 +22,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .candidates import THERMAL, Candidate, Variant
+from .candidates import THERMAL, Candidate, Variant, implausible
 from .equation_error import Context, Fit, delta_bic, fit_columns, heldout_comparison, robust_std
 
 
@@ -206,7 +206,12 @@ def forward_select(ctx: Context, loc: dict, lib: dict[str, Candidate], names: li
                        key=lambda e: (len(e.added), -e.dbic))
             best.heldout = heldout_comparison(ctx, base, best.fit, weights)
             ho = best.heldout
-            if best.dbic <= gate.bic_threshold:
+            idx = [best.fit.keys.index(k) for k in best.added]
+            why = implausible(lib[name], best.fit.beta[idx], best.fit.cov[np.ix_(idx, idx)], best.added,
+                              best.variant, ctx)
+            if why:
+                best.reason = why
+            elif best.dbic <= gate.bic_threshold:
                 best.reason = f"ΔBIC {best.dbic:.1f} <= {gate.bic_threshold:g} (not supported by the training data)"
             elif not ho.get("available"):
                 best.reason = "no held-out data for this equation"
