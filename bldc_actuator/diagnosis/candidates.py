@@ -51,6 +51,8 @@ class Variant:
     #: continuous hyper-parameter refined in the final fit: name -> (value, lo, hi, rebuild(ctx, value) -> columns)
     nonlinear: dict[str, tuple] = field(default_factory=dict)
     additive: bool = False                        #: other variants of the same effect may join later
+    #: columns that depend on their own coefficient (fixed-point): (ctx, coef of the first key) -> {key: builder}
+    iterate: Callable | None = None
 
     @property
     def keys(self) -> list[str]:
@@ -133,12 +135,14 @@ def col_load(kind):
     return build
 
 
-def col_kt(equations):
+def col_kt(equations, kappa: float = 1.0):
+    """Torque-constant scale κ = K_true/K (coefficient κ - 1). Mechanical (current units): i = P/(κK), so
+    the column is -P/(κ̂K) at the current estimate κ̂ (iterated to a fixed point); electrical: K ω."""
     def build(ctx):
         S = ctx.sig
         out = {}
         if "mechanical" in equations:
-            out["mechanical"] = -S["K"] * S["i_col"]
+            out["mechanical"] = -S["P"] / kappa       # divided by K with every mechanical column
         if "electrical" in equations and "v_q" in S:
             out["electrical"] = S["K"] * S["omega"]
         return out
@@ -169,7 +173,7 @@ def col_magnet(ctx):
     m = ctx.params.motor
     S = ctx.sig
     dT = S["T_h"] - m.reference_temperature
-    out = {"mechanical": -m.torque_constant_q * dT * S["i_col"]}
+    out = {"mechanical": -dT * S["P"]}
     if "v_q" in S:
         out["electrical"] = m.torque_constant_q * dT * S["omega"]
     return out
@@ -189,15 +193,6 @@ def col_dead_time(ctx):
 
 def col_delay(ctx):
     return {"electrical": ctx.sig["dv_dt"]}
-
-
-def col_vsat(limit_fraction):
-    def build(ctx):
-        S = ctx.sig
-        h = S["headroom"]
-        excess = np.clip(1.0 - limit_fraction / np.maximum(h, 1e-9), 0.0, None)
-        return {"electrical": S["v_q"] * excess}
-    return build
 
 
 # ------------------------------------------------------------------------------------ excitation
@@ -235,12 +230,14 @@ def excite_viscous(ctx):
 
 
 def excite_angle(order):
+    """``order`` cycles per revolution, or a callable(params) -> order."""
     def check(ctx):
+        o = order(ctx.params) if callable(order) else order
         if float(ctx.sig["theta_known"]) <= 0:
             return "needs the rotor angle (position channel)"
         th = ctx.dsig("theta")
-        span = float(np.nanmax(th) - np.nanmin(th)) * order / (2 * math.pi)
-        return None if span >= 2.0 else f"needs the rotor to sweep at least two periods of order {order}"
+        span = float(np.nanmax(th) - np.nanmin(th)) * o / (2 * math.pi)
+        return None if span >= 2.0 else f"needs the rotor to sweep at least two periods of order {o}"
     return check
 
 
@@ -320,9 +317,10 @@ def _cogging_orders(ctx, loc) -> list[int]:
     if ctx.params.effects.cogging_order:
         orders.append(int(ctx.params.effects.cogging_order))
     spec = (loc.get("mechanical") or {}).get("order_spectrum") or {}
-    for pk in spec.get("peaks", [])[:4]:
+    # N_c = lcm(slots, 2p) is always a multiple of 2p: other peaks (p, 3p...) are electrical, not cogging
+    for pk in spec.get("peaks", [])[:6]:
         o = int(pk["order"])
-        if o not in orders and o >= max(4, p):
+        if o not in orders and o % (2 * p) == 0:
             orders.append(o)
     return orders
 
@@ -340,19 +338,50 @@ def v_cogging(ctx, loc):
     return out
 
 
+def col_eripple(order, which, kind):
+    """Electrical-angle ripple, coefficient in A (sensor) or per unit (flux), shared by both equations:
+
+    offset  current-sensor offsets: i_meas = i_true + δ cos(pθ+φ) -> mechanical (current units) +δ·cos,
+            voltage -R δ·cos (the loop regulates the measured current, so the true one carries -δ)
+    gain    sensor gain mismatch: i_meas = i_true (1 + g cos(2pθ+φ)) -> +g i cos, voltage -R g i cos
+    flux    flux harmonic: torque and back-EMF x (1 + h cos(6pθ+φ)) -> -h i cos, voltage +K ω h cos
+    """
+    def build(ctx):
+        S = ctx.sig
+        b = effects.angle_harmonic_basis(S["theta"], order, 1)[:, 0 if which == "cos" else 1]
+        b = b * resolvable(ctx, order)
+        out = {}
+        if kind == "offset":
+            out["mechanical"] = S["K"] * b                      # /K -> current units
+            if "v_q" in S:
+                out["electrical"] = -S["R"] * b
+        elif kind == "gain":
+            out["mechanical"] = S["K"] * S["i_col"] * b
+            if "v_q" in S:
+                out["electrical"] = -S["R"] * S["i_col"] * b
+        elif kind == "flux":
+            out["mechanical"] = -S["K"] * S["i_col"] * b
+            if "v_q" in S:
+                out["electrical"] = S["K"] * S["omega"] * b
+        else:   # a torque ripple independent of current
+            out["mechanical"] = b
+        return out
+    return build
+
+
 def v_eripple(ctx, loc):
     p = ctx.params.motor.pole_pairs
-    forms = [("current-sensor offset (order p, independent of current)", p, False),
-             ("current-sensor gain mismatch (order 2p, proportional to current)", 2 * p, True),
-             ("flux / dead-time harmonic (order 6p, proportional to current)", 6 * p, True),
-             ("torque ripple at order 6p (independent of current)", 6 * p, False)]
+    forms = [("current-sensor offset (order p)", p, "offset", "A"),
+             ("current-sensor gain mismatch (order 2p, proportional to current)", 2 * p, "gain", ""),
+             ("flux harmonic (order 6p, torque and back-EMF)", 6 * p, "flux", ""),
+             ("torque ripple at order 6p (independent of current)", 6 * p, "torque", "N*m")]
     out = []
-    for label, order, weighted in forms:
-        tag = "i" if weighted else "c"
-        cols = {f"er{order}{tag}cos": col_harmonic(order, 1, "cos", weighted),
-                f"er{order}{tag}sin": col_harmonic(order, 1, "sin", weighted)}
-        out.append(Variant("electrical_angle_ripple", label, cols, hyper={"order": order, "current_weighted": weighted},
-                           additive=True))
+    for label, order, kind, unit in forms:
+        cols = {f"er{order}{kind}cos": col_eripple(order, "cos", kind),
+                f"er{order}{kind}sin": col_eripple(order, "sin", kind)}
+        out.append(Variant("electrical_angle_ripple", label, cols,
+                           hyper={"order": order, "kind": kind, "unit": unit,
+                                  "current_weighted": kind in ("gain", "flux")}, additive=True))
     return out
 
 
@@ -368,23 +397,21 @@ def v_load(ctx, loc):
     return out
 
 
+def _kt_iterate(key, equations):
+    return lambda ctx, coef: {key: col_kt(equations, max(0.05, 1.0 + coef))}
+
+
 def v_kt(ctx, loc):
-    out = []
+    """One K for torque and back-EMF (the model has one): both equations when both exist."""
     if "electrical" in ctx.blocks and "mechanical" in ctx.blocks:
-        out.append(Variant("torque_constant_error", "flux: same factor on torque and back-EMF",
-                           {"kt_both": col_kt(("mechanical", "electrical"))}, hyper={"equations": "both"}))
-    if "mechanical" in ctx.blocks:
-        out.append(Variant("torque_constant_error", "torque only (current scale / torque frame)",
-                           {"kt_mech": col_kt(("mechanical",))}, hyper={"equations": "mechanical"}))
-    if "electrical" in ctx.blocks:
-        out.append(Variant("torque_constant_error", "back-EMF only",
-                           {"kt_elec": col_kt(("electrical",))}, hyper={"equations": "electrical"}))
-    return out
-
-
-def v_vsat(ctx, loc):
-    return [Variant("voltage_saturation", f"voltage limit at {f:.2f} x nominal", {f"vsat@{f:.2f}": col_vsat(f)},
-                    hyper={"limit_fraction": f}) for f in (0.8, 0.9, 0.95)]
+        eqs, label = ("mechanical", "electrical"), "same factor on torque and back-EMF"
+    elif "mechanical" in ctx.blocks:
+        eqs, label = ("mechanical",), "from the torque balance (no voltage)"
+    else:
+        eqs, label = ("electrical",), "from the back-EMF (no motion equation)"
+    key = "kt_" + "_".join(e[:4] for e in eqs)
+    return [Variant("torque_constant_error", label, {key: col_kt(eqs)}, hyper={"equations": eqs},
+                    iterate=_kt_iterate(key, eqs))]
 
 
 # ------------------------------------------------------------------------------ parameter mapping
@@ -441,14 +468,15 @@ def params_cogging(coef, cov, keys, variant, ctx):
 
 def params_eripple(coef, cov, keys, variant, ctx):
     o = variant.hyper["order"]
-    w = variant.hyper["current_weighted"]
-    unit = "N*m/A" if w else "N*m"
+    kind = variant.hyper.get("kind", "torque")
+    unit = variant.hyper.get("unit", "")
+    name = {"offset": "sensor_offset", "gain": "sensor_gain_ripple", "flux": "flux_harmonic",
+            "torque": "torque_ripple"}.get(kind, "ripple")
     amp = math.hypot(coef[0], coef[1])
-    ph = math.atan2(coef[1], coef[0])
-    return {f"ripple_order_{o}{'_per_amp' if w else ''}_amplitude": {"value": amp, "sd": max(_sd(cov, 0), _sd(cov, 1)),
-                                                                      "unit": unit, "field": None},
-            f"ripple_order_{o}{'_per_amp' if w else ''}_phase": {"value": ph, "sd": float("nan"), "unit": "rad",
-                                                                  "field": None},
+    ph = math.atan2(-coef[1], coef[0])     # a cos + b sin = A cos(kθ + φ)
+    return {f"{name}_order_{o}_amplitude": {"value": amp, "sd": max(_sd(cov, 0), _sd(cov, 1)), "unit": unit,
+                                            "field": None},
+            f"{name}_order_{o}_phase": {"value": ph, "sd": float("nan"), "unit": "rad", "field": None},
             "_cos": {"value": float(coef[0]), "sd": _sd(cov, 0), "unit": unit, "field": None},
             "_sin": {"value": float(coef[1]), "sd": _sd(cov, 1), "unit": unit, "field": None}}
 
@@ -539,12 +567,12 @@ def library() -> dict[str, Candidate]:
                   "cogging torque: torque ripple locked to the rotor angle (slots x magnets), present without current",
                   True, {"electrical_angle_ripple": "repeat at a different current: cogging does not scale with "
                          "current; sensor-gain ripple does"},
-                  v_cogging, excite_angle(8), params_cogging))
-    add(Candidate("electrical_angle_ripple", ("mechanical",), ("current", "position"),
+                  v_cogging, excite_angle(lambda p: 2 * p.motor.pole_pairs), params_cogging))
+    add(Candidate("electrical_angle_ripple", ("mechanical", "electrical"), ("current", "position"),
                   "torque ripple locked to the ELECTRICAL angle (current-sensor offset at order p, gain mismatch at "
                   "2p, flux harmonics / dead time at 6p)",
                   False, {"cogging_torque": "repeat at a different current: cogging does not scale with current"},
-                  v_eripple, excite_angle(1), params_eripple))
+                  v_eripple, excite_angle(lambda p: p.motor.pole_pairs), params_eripple))
     add(Candidate("position_dependent_load", ("mechanical",), ("current", "position"),
                   "a load that depends on the output angle (gravity, spring) plus a constant load",
                   True, {"asymmetric_friction": "hold still at several angles, or move in both directions over the "
@@ -591,11 +619,11 @@ def library() -> dict[str, Candidate]:
                   {"torque_constant_error": "steps to several current levels: saturation only bends the top"},
                   v_single("magnetic_saturation", {"sat": col_saturation}), excite_saturation,
                   params_generic({"sat": ("saturation_coefficient", "1/A", None, None)})))
-    add(Candidate("voltage_saturation", ("electrical",), ("voltage_q", "current", "velocity|position"),
-                  "the inverter cannot apply the requested voltage near the limit (bus sag, modulation limit)", False,
+    add(Candidate("voltage_saturation", ("tracking",), ("current", "current_command|torque_command", "velocity|position"),
+                  "the inverter cannot apply the voltage the model allows near the limit (bus sag, modulation "
+                  "limit): the current stops following its command early", False,
                   {"dead_time": "run at high speed with low current, and at low speed with high current"},
-                  v_vsat, excite_headroom,
-                  params_generic({f"vsat@{f:.2f}": ("clipped_fraction", "", None, None) for f in (0.8, 0.9, 0.95)})))
+                  None, None, None))
     add(Candidate("dead_time", ("electrical",), ("voltage_q", "current", "velocity|position"),
                   "inverter dead time: the applied voltage falls short by a constant times the sign of the current",
                   False, {"coulomb_friction": "friction acts on torque: compare the voltage equation at standstill "
@@ -620,6 +648,7 @@ def library() -> dict[str, Candidate]:
 
 EFFECT_NAMES = tuple(library())
 THERMAL = ("thermal_parameters", "iron_loss")
+SPECIAL = THERMAL + ("voltage_saturation",)   #: checked by output-error routines, not the linear selection
 
 
 # ------------------------------------------------------------------------------------------ evidence

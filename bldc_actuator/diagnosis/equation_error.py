@@ -3,9 +3,11 @@
 Two equations of the q-axis model (see :mod:`bldc_actuator.model`), written as residuals that are zero when
 the nominal parameters are right (motor side, SI):
 
-mechanical [N·m]   ``r_m = K(T_h) i_q - J dω/dt - b ω - τ_f(ω) - τ_cog(θ) - τ_ext/N``
-                   (``τ_ext`` = torque-sensor reading when there is one, else the nominal load
-                   ``load.*`` plus the ``load_torque`` channel; all at the output)
+mechanical [A]     ``r_m = i_q - P / K(T_h)``,  ``P = J dω/dt + b ω + τ_f(ω) + τ_cog(θ) + τ_ext/N``
+                   (the torque the motion needs; ``τ_ext`` = torque-sensor reading when there is one, else
+                   the nominal load ``load.*`` plus the ``load_torque`` channel; all at the output). Written
+                   in current units with the measured current alone on the left, so its sensor noise is
+                   not scaled by a fitted torque constant; torque columns are divided by K.
 electrical [V]     ``r_e = v_q - R(T_w) i_q - L di_q/dt - K(T_h) ω - p ω L i_d``  (needs ``voltage_q``)
 
 A missing effect shows up as ``r = Σ columns · Δparameters``; :mod:`.candidates` builds those columns.
@@ -30,7 +32,7 @@ from .. import effects, frames
 from ..params import ActuatorParams
 
 EQUATIONS = ("mechanical", "electrical")
-UNITS = {"mechanical": "N*m (motor side)", "electrical": "V (q-axis)"}
+UNITS = {"mechanical": "A (q current; torque / K)", "electrical": "V (q-axis)"}
 
 
 # -- filtering and decimation ---------------------------------------------------------------------
@@ -162,14 +164,15 @@ def _lag(ctx, late: np.ndarray, ref: np.ndarray) -> float:
     return float(coef[1] / coef[0]) if coef[0] else 0.0
 
 
-def _regressor_current(ctx: Context) -> np.ndarray:
-    """The q current used to BUILD regressor columns (targets keep the measured current).
+def _current_instrument(ctx: Context) -> np.ndarray | None:
+    """Instrument for every column built from the q current (targets and regressors keep the measured one).
 
     A column made from the measured current carries the same sensor noise as the target (which contains
-    ``K i_meas`` or ``R i_meas``): least squares then fits the noise and biases every current-proportional
-    term (errors in variables; with 0.1 A noise a torque-constant or resistance "error" appears in data that
-    has none). When a command is recorded and the current loop tracks it, the command (aligned by the loop's
-    lag, clipped to the current limit) is the noise-free instrument; elsewhere the measured current is used."""
+    ``K i_meas`` or ``R i_meas``): least squares then fits that noise and biases every current-proportional
+    term (errors in variables; with 0.1 A of noise a torque-constant or resistance "error" appears in data that
+    has none). The recorded command, aligned by the current loop's lag and clipped to the current limit, is
+    free of that noise and follows the current: fits use it as an instrumental variable
+    (``β = (ZᵀX)⁻¹ Zᵀy``), which stays consistent where the loop lags or saturates."""
     S, raw, have = ctx.sig, ctx.raw, ctx.have
     i_meas = S["i_q"]
     p = ctx.params
@@ -179,11 +182,13 @@ def _regressor_current(ctx: Context) -> np.ndarray:
         cmd = raw["torque_command"] / (p.motor.torque_constant_q * p.gear.gear_ratio)
         ok_c = ctx.valid["torque_command"]
     else:
-        return i_meas
-    if ctx.steady:
-        return np.where(ok_c, cmd, i_meas)
+        ctx.notes.append("no current command recorded: current-proportional terms are fitted against the "
+                         "measured current (errors in variables bias them towards zero by the noise share)")
+        return None
     lim = p.drive.current_limit
     cmd = np.clip(cmd, -lim, lim)
+    if ctx.steady:
+        return np.where(ok_c, cmd, i_meas)
     lp_i = ctx.dec.lowpass(i_meas)
     best = None
     for lag in range(0, 6):
@@ -191,19 +196,16 @@ def _regressor_current(ctx: Context) -> np.ndarray:
         e = lp_i - ctx.dec.lowpass(c)
         rms = float(np.sqrt(np.mean(e[ok_c] ** 2))) if ok_c.any() else np.inf
         if best is None or rms < best[0]:
-            best = (rms, lag, c, e)
-    rms, lag, c, e = best
+            best = (rms, lag, c)
+    rms, lag, c = best
     spread = float(np.std(lp_i))
-    if not (spread > 0 and rms < 0.5 * spread):
-        ctx.notes.append(f"the measured current does not follow the command (tracking error {rms:.3g} A vs "
-                         f"{spread:.3g} A of signal): regressors use the measured current")
-        return i_meas
-    noise = 1.4826 * float(np.median(np.abs(e - np.median(e))))
-    track = (np.abs(e) <= max(5.0 * noise, 1e-3 * lim)) & ok_c
-    ctx.notes.append(f"current-proportional regressors use the current command ({lag} sample(s) later), the "
-                     f"loop tracks it in {100 * track.mean():.0f}% of samples (elsewhere the measured current): "
-                     f"a column built from the noisy measured current would fit its own noise")
-    return np.where(track, c, i_meas)
+    if not (spread > 0 and np.corrcoef(lp_i[ok_c], ctx.dec.lowpass(c)[ok_c])[0, 1] > 0.5):
+        ctx.notes.append(f"the measured current hardly follows the command (tracking error {rms:.3g} A vs "
+                         f"{spread:.3g} A): no current instrument, current-proportional terms may be biased")
+        return None
+    ctx.notes.append(f"current-proportional terms are fitted with the current command ({lag} sample(s) later) as "
+                     f"instrument (tracking error {rms:.3g} A RMS vs {spread:.3g} A of signal)")
+    return np.where(ok_c, c, i_meas)
 
 
 def _noise_std(x: np.ndarray) -> float:
@@ -242,6 +244,7 @@ class Context:
     nuisance: dict[str, Callable] = field(default_factory=dict)   #: always-fitted, never-reported columns
     nuisance_reason: str = ""
     _col_cache: dict = field(default_factory=dict)
+    _inst_cache: dict = field(default_factory=dict)
 
     # decimated helpers
     @property
@@ -259,19 +262,42 @@ class Context:
             self._col_cache[key] = self.dec.apply(self.sig[name])
         return self._col_cache[key]
 
-    def column(self, key: str, builder: Callable[["Context"], dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
-        """Decimated column ``key`` (equation -> array), built at the raw rate by ``builder`` and cached."""
+    def column(self, key, builder: Callable[["Context"], dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+        """Decimated column ``key`` (equation -> array), built at the raw rate by ``builder`` and cached.
+
+        Built twice when a current instrument exists: with the measured current (the regressor) and with
+        the aligned current command (its instrument, :meth:`instrument`)."""
         if key not in self._col_cache:
-            raw = builder(self)
-            out = {}
-            for eq, x in raw.items():
-                if eq in self.blocks:
-                    x = np.asarray(x, dtype=float)
-                    if x.ndim == 0:
-                        x = np.full(len(self.t), float(x))
-                    out[eq] = self.dec.apply(np.nan_to_num(x))
+            S = self.sig
+            S["i_col"] = S.get("i_q")
+            out = self._build(builder)
             self._col_cache[key] = out
+            if "i_inst" in S:
+                S["i_col"] = S["i_inst"]
+                try:
+                    z = self._build(builder)
+                finally:
+                    S["i_col"] = S.get("i_q")
+                if any(not np.array_equal(z[eq], out[eq]) for eq in out):
+                    self._inst_cache[key] = z
         return self._col_cache[key]
+
+    def instrument(self, key) -> dict[str, np.ndarray] | None:
+        """Instrument of a column built from the measured current (see :func:`_regressor_current`)."""
+        return self._inst_cache.get(key)
+
+    def _build(self, builder) -> dict[str, np.ndarray]:
+        raw = builder(self)
+        out = {}
+        for eq, x in raw.items():
+            if eq in self.blocks:
+                x = np.asarray(x, dtype=float)
+                if x.ndim == 0:
+                    x = np.full(len(self.t), float(x))
+                if eq == "mechanical":     # torque columns -> current units, like the equation
+                    x = x / self.sig["K"]
+                out[eq] = self.dec.apply(np.nan_to_num(x))
+        return out
 
 
 @dataclass
@@ -458,7 +484,10 @@ def _derive(ctx: Context) -> None:
     if "current" in have:
         S["i_q"] = raw["current"]
         S["di_dt"] = zero.copy() if ctx.steady else _gradient(S["i_q"], t, segs)
-        S["i_col"] = _regressor_current(ctx)
+        S["i_col"] = S["i_q"]
+        inst = _current_instrument(ctx)
+        if inst is not None:
+            S["i_inst"] = inst
     S["i_d"] = raw["current_d"] if "current_d" in have else zero.copy()
     ctx.valid.setdefault("i_d", ctx.valid.get("current_d", ones))
     # temperatures: measured, proxy, or the nominal thermal network driven by the measured current
@@ -593,8 +622,12 @@ def _build_blocks(ctx: Context) -> None:
             if "load_torque" in have:
                 tau_ext = tau_ext + ctx.raw["load_torque"]
                 ext_ok = ctx.valid["load_torque"]
-        y = S["K"] * S["i_q"] - m.rotor_inertia * S["omega_dot"] - m.viscous_damping * w - tau_f - tau_cog \
-            - tau_ext / N
+        # torque the motion needs (nominal model), and the mechanical equation in CURRENT units with the
+        # measured current on the left: its sensor noise stays additive instead of being scaled by a fitted
+        # torque constant (which would make the right K look worse than a wrong inertia)
+        P = m.rotor_inertia * S["omega_dot"] + m.viscous_damping * w + tau_f + tau_cog + tau_ext / N
+        S["P"] = P
+        y = S["i_q"] - P / S["K"]
         ok = ctx.valid["current"] & ctx.valid["omega"] & ext_ok
         # stuck (no motion at all for a while): the friction force is then anything up to breakaway, so those
         # samples say nothing. Slow but moving samples stay: dropping them by a speed threshold would select
@@ -667,30 +700,43 @@ def fit_columns(ctx: Context, cols: dict[str, dict[str, np.ndarray]], keys: list
     """
     blocks = blocks or list(ctx.blocks)
     ho = ctx.holdout_dec
-    Xs, ys, parts = [], [], []
+    Xs, Zs, ys, parts = [], [], [], []
+    use_iv = False
     for eq in blocks:
         B = ctx.blocks[eq]
         rows = B.rows(ho, "train")
         w = weights[eq]
         X = np.zeros((int(rows.sum()), len(keys)))
+        Z = np.zeros_like(X)
         for j, k in enumerate(keys):
             c = cols[k].get(eq)
             if c is not None:
                 X[:, j] = c[rows]
+                inst = ctx.instrument(k)
+                if inst is not None and inst.get(eq) is not None:
+                    Z[:, j] = inst[eq][rows]
+                    use_iv = True
+                else:
+                    Z[:, j] = X[:, j]
         Xs.append(w * X)
+        Zs.append(w * Z)
         ys.append(w * B.target[rows])
         parts.append((eq, rows))
     X = np.vstack(Xs) if Xs else np.zeros((0, len(keys)))
+    Z = np.vstack(Zs) if Zs else np.zeros((0, len(keys)))
     y = np.concatenate(ys) if ys else np.zeros(0)
     if keys:
         scale = np.sqrt((X ** 2).sum(axis=0))
         scale[scale == 0] = 1.0
-        Xn = X / scale
-        beta_n, *_ = np.linalg.lstsq(Xn, y, rcond=1e-10)
+        Xn, Zn = X / scale, Z / scale
+        if use_iv:   # instrumental variables: Zᵀ(y - Xβ) = 0
+            beta_n, *_ = np.linalg.lstsq(Zn.T @ Xn, Zn.T @ y, rcond=1e-12)
+        else:
+            beta_n, *_ = np.linalg.lstsq(Xn, y, rcond=1e-10)
         beta = beta_n / scale
     else:
         beta = np.zeros(0)
-        Xn, scale = X, np.ones(0)
+        Xn, Zn, scale = X, Z, np.ones(0)
     rss, nn, neff, resid = {}, {}, {}, {}
     taus = []
     for eq, rows in parts:
@@ -715,7 +761,11 @@ def fit_columns(ctx: Context, cols: dict[str, dict[str, np.ndarray]], keys: list
         s2 = float(rw @ rw) / (len(y) - len(keys))
         tau = float(np.mean(taus)) if taus else 1.0
         try:
-            cov_n = np.linalg.pinv(Xn.T @ Xn) * s2 * tau
+            if use_iv:
+                A = np.linalg.pinv(Zn.T @ Xn)
+                cov_n = A @ (Zn.T @ Zn) @ A.T * s2 * tau
+            else:
+                cov_n = np.linalg.pinv(Xn.T @ Xn) * s2 * tau
         except np.linalg.LinAlgError:
             cov_n = np.full((len(keys), len(keys)), np.inf)
         cov = cov_n / np.outer(scale, scale)

@@ -36,7 +36,7 @@ from . import equation_error as ee
 from . import locate as loc_mod
 from . import refit
 from .report import DiagnosisReport
-from .selection import GateConfig, forward_select
+from .selection import GateConfig, fit_model, forward_select
 
 
 @dataclass
@@ -148,9 +148,12 @@ def diagnose(signals, params: ActuatorParams, *, options: DiagnoseOptions | None
 
     # 4. attribute -----------------------------------------------------------------------------
     t0 = time.perf_counter()
-    linear = [n for n in names if n not in cands.THERMAL]
+    linear = [n for n in names if n not in cands.SPECIAL]
     sel = forward_select(ctx, located, lib, linear, options.gate, progress=lambda m: say(f"4/6 attribute: {m}"))
     thermal = refit.thermal_select(ctx, [n for n in names if n in cands.THERMAL], lib, options.gate)
+    vsat = refit.voltage_saturation_check(ctx, lib, options.gate, "voltage_saturation" in names)
+    for k in ("findings", "rejected", "not_checkable"):
+        thermal[k] = thermal[k] + vsat[k]
     timing["attribute"] = time.perf_counter() - t0
     say(f"4/6 attribute: accepted {[a.effect for a in sel.accepted] + [f['effect'] for f in thermal['findings']] or 'nothing'}; "
         f"{len(sel.not_checkable) + len(thermal['not_checkable'])} not checkable ({timing['attribute']:.2f} s)")
@@ -250,7 +253,7 @@ def _findings(ctx, sel, ff, pars, lib, located, not_sim) -> list[dict]:
     for a in sel.accepted:
         cand = lib[a.effect]
         others = [k for k in ff.keys if k not in a.added]
-        f_without = ee.fit_columns(ctx, sel.cols, others, weights)
+        f_without = fit_model(ctx, sel.cols, others, weights, sel.iterating)
         eqs = [eq for eq in cand.equations if eq in ctx.blocks and any(sel.cols[k].get(eq) is not None for k in a.added)]
         metrics = []
         for eq in eqs:
@@ -299,7 +302,7 @@ def _findings(ctx, sel, ff, pars, lib, located, not_sim) -> list[dict]:
 
 def _explained(ctx, sel, a) -> float:
     """Fraction of the nominal residual variance (weighted, training) removed by this effect's columns alone."""
-    alone = ee.fit_columns(ctx, sel.cols, list(ctx.nuisance) + list(a.variant.keys), sel.weights)
+    alone = fit_model(ctx, sel.cols, list(ctx.nuisance) + list(a.variant.keys), sel.weights, sel.iterating)
     num = sum(sel.weights[eq] ** 2 * (sel.base_fit.rss[eq] - alone.rss[eq]) for eq in alone.rss)
     den = sum(sel.weights[eq] ** 2 * sel.base_fit.rss[eq] for eq in alone.rss)
     return float(num / den) if den > 0 else 0.0

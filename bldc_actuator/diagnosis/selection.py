@@ -32,6 +32,7 @@ class GateConfig:
     min_heldout_gain: float = 0.02       #: relative RMS improvement on held-out data
     min_heldout_t: float = 3.0           #: t-statistic of the per-chunk improvement
     alias_corr: float = 0.9
+    max_equation_worsening: float = 0.001    #: a multi-equation effect may not worsen any of them (held-out)
     max_rounds: int = 8
 
 
@@ -75,6 +76,30 @@ class SelectionResult:
     not_checkable: list[dict[str, Any]]
     rounds: list[list[dict[str, Any]]]
     removed: list[dict[str, Any]]
+    iterating: dict = field(default_factory=dict)
+
+
+def fit_model(ctx: Context, cols, keys: list[str], weights, iterating: dict[str, Variant]) -> Fit:
+    """:func:`fit_columns`, with the columns of self-referencing variants (``Variant.iterate``, e.g. the
+    torque-constant scale) rebuilt at the latest coefficient until it settles (fixed point, <= 6 passes)."""
+    f = fit_columns(ctx, cols, keys, weights)
+    active = {k: v for k, v in iterating.items() if k in keys}
+    for _ in range(6):
+        if not active:
+            break
+        coef = f.coef()
+        moved = 0.0
+        for k, v in active.items():
+            c = float(coef[k])
+            for kk, b in v.iterate(ctx, c).items():
+                tag = cols.get(("_iter_at", kk), 0.0)
+                cols[kk] = ctx.column((kk, "iter", round(c, 7)), b)
+                moved = max(moved, abs(c - tag))
+                cols[("_iter_at", kk)] = c
+        f = fit_columns(ctx, cols, keys, weights)
+        if moved < 1e-6:
+            break
+    return f
 
 
 def _channels_missing(ctx: Context, needs) -> list[str]:
@@ -154,8 +179,9 @@ def forward_select(ctx: Context, loc: dict, lib: dict[str, Candidate], names: li
         cand = lib[name]
         variants, nc = checkable(ctx, cand, loc)
         if nc and nc.get("rejected"):
-            why = ("no angle order stands out of the residual's angle-order spectrum (give effects.cogging_order "
-                   "in the parameters to test a known order)" if name == "cogging_torque" else nc["reason"])
+            why = ("no multiple of 2 x pole_pairs stands out of the residual's angle-order spectrum (cogging "
+                   "order = lcm(slots, 2p); give effects.cogging_order to test a known order)"
+                   if name == "cogging_torque" else nc["reason"])
             early_rejected.append({"effect": name, "form": "", "reason": why})
         elif nc:
             not_checkable.append(nc)
@@ -174,6 +200,7 @@ def forward_select(ctx: Context, loc: dict, lib: dict[str, Candidate], names: li
     for k, b in ctx.nuisance.items():
         cols[k] = ctx.column(k, b)
     keys: list[str] = list(ctx.nuisance)
+    iterating: dict[str, Variant] = {}
     w0 = {eq: 1.0 for eq in ctx.blocks}
     base = fit_columns(ctx, cols, keys, w0)
     weights = _weights(ctx, base)
@@ -195,7 +222,10 @@ def forward_select(ctx: Context, loc: dict, lib: dict[str, Candidate], names: li
                 added = [k for k in v.keys if k not in keys]
                 if not added:
                     continue
-                f = fit_columns(ctx, cols, keys + added, weights)
+                its = dict(iterating)
+                if v.iterate is not None:
+                    its[v.keys[0]] = v
+                f = fit_model(ctx, cols, keys + added, weights, its)
                 tried.append(Evaluation(name, v, added, f, delta_bic(base, f), {}, False, ""))
             if not tried:
                 continue
@@ -218,6 +248,10 @@ def forward_select(ctx: Context, loc: dict, lib: dict[str, Candidate], names: li
             elif ho["rel"] <= gate.min_heldout_gain:
                 best.reason = (f"held-out error {'worse' if ho['rel'] < 0 else 'not better'} "
                                f"({-100 * ho['rel']:+.2f}% RMS) although ΔBIC {best.dbic:.1f}")
+            elif any(a1 > a0 * (1.0 + gate.max_equation_worsening) for a0, a1 in ho["per_eq"].values()):
+                worse = [eq for eq, (a0, a1) in ho["per_eq"].items() if a1 > a0 * (1.0 + gate.max_equation_worsening)]
+                best.reason = (f"makes the {', '.join(worse)} equation worse on held-out data (one physical "
+                               f"parameter must fit every equation it enters)")
             elif ho["t"] <= gate.min_heldout_t:
                 best.reason = (f"held-out improvement {100 * ho['rel']:.2f}% not significant "
                                f"(t = {ho['t']:.1f} <= {gate.min_heldout_t:g})")
@@ -230,9 +264,9 @@ def forward_select(ctx: Context, loc: dict, lib: dict[str, Candidate], names: li
         passing = [e for e in evals if e.passed]
         if not passing:
             break
-        # rank by held-out gain; among near-ties (within 2 % of the best gain) the simplest form wins
+        # rank by held-out gain; among near-ties (within 5 % of the best gain) the simplest form wins
         top = max(e.heldout["rel"] for e in passing)
-        near = [e for e in passing if e.heldout["rel"] >= top - max(0.002, 0.02 * top)]
+        near = [e for e in passing if e.heldout["rel"] >= top - max(0.002, 0.05 * top)]
         win = min(near, key=lambda e: (len(e.added), -e.dbic))
         say(f"round {rnd + 1}: accepted {win.effect} ({win.variant.label}); {win.reason}")
         # aliases: other passing candidates explaining the same residual component
@@ -249,10 +283,12 @@ def forward_select(ctx: Context, loc: dict, lib: dict[str, Candidate], names: li
                                                  e.effect: round(e.heldout["rel"], 4)}})
         accepted.append(Accepted(win.effect, win.variant, win.added, rnd + 1, win.dbic, win.heldout))
         used_labels.add((win.effect, win.variant.label))
+        if win.variant.iterate is not None:
+            iterating[win.variant.keys[0]] = win.variant
         keys = keys + win.added
         base = win.fit
         weights = _weights(ctx, base)
-        base = fit_columns(ctx, cols, keys, weights)
+        base = fit_model(ctx, cols, keys, weights, iterating)
         last_eval.pop(win.effect, None)
     # backward check: every accepted effect must still earn its place given the others
     removed: list[dict] = []
@@ -261,13 +297,13 @@ def forward_select(ctx: Context, loc: dict, lib: dict[str, Candidate], names: li
         changed = False
         for a in list(accepted):
             others = [k for k in keys if k not in a.added]
-            f_without = fit_columns(ctx, cols, others, weights)
+            f_without = fit_model(ctx, cols, others, weights, iterating)
             db = delta_bic(f_without, base)
             ho = heldout_comparison(ctx, f_without, base, weights)
             if db <= gate.bic_threshold or ho["rel"] <= gate.min_heldout_gain or ho["t"] <= gate.min_heldout_t:
                 accepted.remove(a)
                 keys = others
-                base = fit_columns(ctx, cols, keys, weights)
+                base = fit_model(ctx, cols, keys, weights, iterating)
                 removed.append({"effect": a.effect, "form": a.variant.label,
                                 "reason": f"redundant once the others are in (ΔBIC {db:.1f}, held-out "
                                           f"{100 * ho['rel']:+.2f}%)"})
@@ -289,4 +325,5 @@ def forward_select(ctx: Context, loc: dict, lib: dict[str, Candidate], names: li
     rejected += early_rejected
     for r in removed:
         rejected.append({"effect": r["effect"], "form": r["form"], "reason": r["reason"]})
-    return SelectionResult(accepted, base, nominal, cols, weights, rejected, aliases, not_checkable, rounds, removed)
+    return SelectionResult(accepted, base, nominal, cols, weights, rejected, aliases, not_checkable, rounds, removed,
+                           iterating)
