@@ -17,7 +17,7 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Iterator, Mapping
 
 INF = math.inf
 
@@ -346,12 +346,13 @@ def _value(x):
 
 # -- YAML -----------------------------------------------------------------------------------------
 
-def _flatten(tree: dict, prefix: str = "") -> dict[str, Any]:
+def flatten_tree(tree: Mapping, prefix: str = "") -> dict[str, Any]:
+    """Nested mapping → flat dotted names (``{"motor": {"winding": "wye"}}`` → ``{"motor.winding": "wye"}``)."""
     out = {}
     for key, value in tree.items():
         name = f"{prefix}{key}"
-        if isinstance(value, dict):
-            out.update(_flatten(value, name + "."))
+        if isinstance(value, Mapping):
+            out.update(flatten_tree(value, name + "."))
         else:
             out[name] = value
     return out
@@ -366,10 +367,10 @@ def params_from_dict(tree: dict, *, base: ActuatorParams | None = None) -> Actua
             tree = value["ros__parameters"]
     if "ros__parameters" in tree:
         tree = tree["ros__parameters"]
-    flat = _flatten(tree)
+    flat = flatten_tree(tree)
     datasheet = {k.split(".", 1)[1]: v for k, v in flat.items() if k.startswith("datasheet.")}
     flat = {k: v for k, v in flat.items() if not k.startswith("datasheet.") and k.split(".")[0] in SECTIONS}
-    unknown = [k for k in _flatten(tree) if k.split(".")[0] not in SECTIONS and not k.startswith("datasheet.")
+    unknown = [k for k in flatten_tree(tree) if k.split(".")[0] not in SECTIONS and not k.startswith("datasheet.")
                and k not in NON_MODEL_KEYS and k.split(".")[0] not in NON_MODEL_SECTIONS]
     if unknown:
         raise ParameterError(unknown[0], f"unknown parameter (sections: {', '.join(SECTIONS)}, datasheet)")

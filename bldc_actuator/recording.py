@@ -138,6 +138,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping
 
 from . import __version__
+from .params import flatten_tree
 
 PROFILE = "ros2"
 SCHEMA_ENCODING = "ros2msg"
@@ -375,17 +376,6 @@ def _plain(value: Any) -> Any:
     return str(value)
 
 
-def _flatten(tree: Mapping, prefix: str = "") -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for key, value in tree.items():
-        name = f"{prefix}{key}"
-        if isinstance(value, Mapping):
-            out.update(_flatten(value, name + "."))
-        else:
-            out[name] = value
-    return out
-
-
 def _nest(flat: Mapping[str, Any]) -> dict[str, Any]:
     tree: dict[str, Any] = {}
     for key, value in flat.items():
@@ -412,7 +402,7 @@ def render_parameters(parameters: Any) -> tuple[str, dict[str, Any]]:
         return P.dump_yaml(parameters, header=f"parameters recorded by {LIBRARY}"), P.to_flat(parameters)
     if not isinstance(parameters, Mapping):
         raise TypeError(f"parameters: expected ActuatorParams or a dict, got {type(parameters).__name__}")
-    flat = _flatten(parameters)
+    flat = flatten_tree(parameters)
     model = {k: v for k, v in flat.items() if k in P.SPECS}
     # None (a ROS parameter that is not set) has no params-file form: such keys are left out
     extra = {k: _plain(v) for k, v in flat.items() if k not in P.SPECS and v is not None}
@@ -446,7 +436,7 @@ def parameters_from_yaml(text: str) -> dict[str, Any]:
         (only,) = tree.values()
         if isinstance(only, Mapping) and "ros__parameters" in only:
             tree = only["ros__parameters"] or {}
-    flat = _flatten(tree)
+    flat = flatten_tree(tree)
     model = {k: v for k, v in flat.items() if k in P.SPECS}
     if model:
         flat.update(P.to_flat(P.from_flat(model)))
@@ -1124,7 +1114,7 @@ def _parameter_issues(scan: _Scan, text: str | None) -> tuple[dict | None, list[
             import yaml
 
             tree = yaml.safe_load(text)
-            return (_flatten(tree) if isinstance(tree, Mapping) else None), issues
+            return (flatten_tree(tree) if isinstance(tree, Mapping) else None), issues
         except Exception:  # noqa: BLE001
             return None, issues
     if not any(name == METADATA_NAME and d.get("record") == "final" for name, d in scan.metadata):
