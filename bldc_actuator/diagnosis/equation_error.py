@@ -245,6 +245,7 @@ class Context:
     nuisance_reason: str = ""
     _col_cache: dict = field(default_factory=dict)
     _inst_cache: dict = field(default_factory=dict)
+    _rows_cache: dict = field(default_factory=dict)
 
     # decimated helpers
     @property
@@ -281,6 +282,22 @@ class Context:
                 if any(not np.array_equal(z[eq], out[eq]) for eq in out):
                     self._inst_cache[key] = z
         return self._col_cache[key]
+
+    def train_rows(self, eq: str) -> np.ndarray:
+        hit = self._rows_cache.get(("rows", eq))
+        if hit is None:
+            hit = self.blocks[eq].rows(self.holdout_dec, "train")
+            self._rows_cache[("rows", eq)] = hit
+        return hit
+
+    def on_train(self, arr: np.ndarray, eq: str) -> np.ndarray:
+        """``arr`` restricted to the training rows of ``eq`` (cached per array: fits reuse columns)."""
+        key = (id(arr), eq)
+        hit = self._rows_cache.get(key)
+        if hit is None or hit[0] is not arr:
+            hit = (arr, arr[self.train_rows(eq)])
+            self._rows_cache[key] = hit
+        return hit[1]
 
     def instrument(self, key) -> dict[str, np.ndarray] | None:
         """Instrument of a column built from the measured current (see :func:`_regressor_current`)."""
@@ -657,14 +674,17 @@ def _build_blocks(ctx: Context) -> None:
 def integrated_autocorrelation_time(r: np.ndarray, max_lag: int = 200) -> float:
     """τ_int = 1 + 2 Σ ρ_k (Sokal window: stop at the first lag with ρ_k < 0.05): samples per
     independent sample of a coloured residual. ``n_eff = n / τ_int``."""
+    import scipy.fft as sfft
+
     r = np.asarray(r, float)
     r = r - r.mean()
     n = len(r)
     if n < 8 or not np.any(r):
         return 1.0
     L = min(max_lag, n // 4)
-    f = np.fft.rfft(r, 2 * n)
-    ac = np.fft.irfft(f * np.conj(f))[: L + 1]
+    m = sfft.next_fast_len(2 * n, real=True)
+    f = sfft.rfft(r, m)
+    ac = sfft.irfft(f.real ** 2 + f.imag ** 2, m)[: L + 1]
     ac = ac / ac[0]
     tau = 1.0
     for k in range(1, L + 1):
@@ -704,17 +724,17 @@ def fit_columns(ctx: Context, cols: dict[str, dict[str, np.ndarray]], keys: list
     use_iv = False
     for eq in blocks:
         B = ctx.blocks[eq]
-        rows = B.rows(ho, "train")
+        rows = ctx.train_rows(eq)
         w = weights[eq]
         X = np.zeros((int(rows.sum()), len(keys)))
         Z = np.zeros_like(X)
         for j, k in enumerate(keys):
             c = cols[k].get(eq)
             if c is not None:
-                X[:, j] = c[rows]
+                X[:, j] = ctx.on_train(c, eq)
                 inst = ctx.instrument(k)
                 if inst is not None and inst.get(eq) is not None:
-                    Z[:, j] = inst[eq][rows]
+                    Z[:, j] = ctx.on_train(inst[eq], eq)
                     use_iv = True
                 else:
                     Z[:, j] = X[:, j]

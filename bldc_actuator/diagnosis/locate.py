@@ -236,10 +236,10 @@ def order_spectrum(theta: np.ndarray, r: np.ndarray, *, max_order: int = 512, po
             wr = ww * rr
             z1 = np.exp(-1j * th)
             zk = z1 ** lo
-            for k in range(lo, hi + 1):
-                amp[k] = 2.0 * abs(wr @ zk) / n_eff
+            for k in range(lo, hi + 1):     # real dot products: a float @ complex product is 20x slower
+                amp[k] = 2.0 * math.hypot(wr @ zk.real, wr @ zk.imag) / n_eff
                 used[k] = int(n_eff)
-                zk = zk * z1
+                zk *= z1
         lo = hi + 1
     good = np.isfinite(amp[1:])
     info["orders"] = [int(k) for k in np.arange(1, max_order + 1)[good]]

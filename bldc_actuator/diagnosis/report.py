@@ -116,7 +116,13 @@ class DiagnosisReport:
     def write_markdown(self, directory: str | Path, *, plots: bool = True) -> Path:
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
-        images = _plots(self, directory) if plots and self._internals else {}
+        if plots and self._internals:
+            from .pipeline import _SingleThreadedBLAS
+
+            with _SingleThreadedBLAS():
+                images = _plots(self, directory)
+        else:
+            images = {}
         md = _markdown(self, images)
         path = directory / "report.md"
         path.write_text(md)
