@@ -140,10 +140,15 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--cases", nargs="*", help="case names (default: all)")
     ap.add_argument("--quick", action="store_true", help="only the fast subset (also run by test/test_concealed.py)")
-    ap.add_argument("--data", type=Path, default=REPO / "benchmarks" / ".cache" / "concealed",
-                    help="where generated recordings are cached (default: benchmarks/.cache/concealed)")
+    ap.add_argument("--seed-offset", type=int, default=0,
+                    help="fresh noise and excitation seeds for every case (0 = the published ones); a check that "
+                         "the diagnoser was not tuned to one draw")
+    ap.add_argument("--data", type=Path, default=None,
+                    help="where generated recordings are cached (default: benchmarks/.cache/concealed[-seedsK])")
     ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results",
                     help="where concealed.md / concealed.json go (default: benchmarks/results)")
+    ap.add_argument("--runs", type=Path, default=None,
+                    help="where diagnose writes each case's report (default: <data>/../concealed_runs)")
     ap.add_argument("--regenerate", action="store_true", help="regenerate recordings even if cached")
     ap.add_argument("--generate-only", action="store_true", help="generate and print the concealment table only")
     ap.add_argument("--timeout", type=float, default=300.0, help="per-case diagnose timeout [s]")
@@ -160,6 +165,9 @@ def main(argv=None) -> int:
         cases = [c for c in cases if c.quick]
     if args.cases:
         cases = [C.get_case(n) for n in args.cases]
+    cases = [C.reseeded(c, args.seed_offset) for c in cases]
+    if args.data is None:
+        args.data = REPO / "benchmarks" / ".cache" / ("concealed" + (f"-seeds{args.seed_offset}" if args.seed_offset else ""))
     t_start = time.perf_counter()
     truths = ensure_data(cases, args.data, args.regenerate, log)
     log("\nconcealment (training recording; effect = full − effect-free twin, noise = full − ideal-sensor twin):")
@@ -174,7 +182,7 @@ def main(argv=None) -> int:
 
     scores = []
     failed = 0
-    run_dir = args.data.parent / "concealed_runs"
+    run_dir = args.runs or args.data.parent / (args.data.name + "_runs")
     for k, case in enumerate(cases, start=1):
         log(f"[{k}/{len(cases)}] {case.name}: hidden {', '.join(case.effects) or 'nothing'} ...")
         report, wall, err = run_case(args.data / case.name, run_dir / case.name, held, args.timeout, args.diagnose_arg)
@@ -192,10 +200,11 @@ def main(argv=None) -> int:
     log(f"\ntotal {time.perf_counter() - t_start:.0f} s")
 
     args.out.mkdir(parents=True, exist_ok=True)
+    stem = "concealed" + (f"-seeds{args.seed_offset}" if args.seed_offset else "") + ("-quick" if args.quick else "")
     meta = {"generator": generator_hash(), "python": platform.python_version(), "machine": platform.machine(),
             "cpus": os.cpu_count(), "date": time.strftime("%Y-%m-%d %H:%M:%S"),
-            "git": _git_head(), "heldout_option": held, "quick": args.quick}
-    (args.out / "concealed.json").write_text(json.dumps(
+            "git": _git_head(), "heldout_option": held, "quick": args.quick, "seed_offset": args.seed_offset}
+    (args.out / f"{stem}.json").write_text(json.dumps(
         {"meta": meta, "summary": summary, "cases": [s.to_dict() for s in scores],
          "truth": {n: {k: v for k, v in t.items() if k != "ranges"} for n, t in truths.items()}},
         indent=2, default=float) + "\n")
@@ -212,10 +221,10 @@ def main(argv=None) -> int:
                 md.append(f"- **{s.case}** named `{d['effect']}`: held-out {d.get('held_out')}; evidence: "
                           f"{json.dumps(d.get('evidence'), default=str)[:400]}")
         md.append("")
-    (args.out / "concealed.md").write_text("\n".join(md))
+    (args.out / f"{stem}.md").write_text("\n".join(md))
     if args.update_doc:
         update_doc(args.update_doc, meta, summary, scores, truths, cases)
-    log(f"wrote {args.out / 'concealed.md'} and {args.out / 'concealed.json'}")
+    log(f"wrote {args.out / (stem + '.md')} and {args.out / (stem + '.json')}")
     return 1 if failed else 0
 
 
@@ -228,7 +237,8 @@ def update_doc(path: Path, meta, summary, scores, truths, cases) -> None:
     if BEGIN not in text or END not in text:
         raise SystemExit(f"{path}: markers {BEGIN} / {END} not found")
     block = "\n".join([BEGIN, "", f"Run of {meta['date']} (git {meta['git']}, generator {meta['generator']}, "
-                        f"{meta['cpus']} CPUs{', quick subset' if meta['quick'] else ''}):", "", "```",
+                        f"{meta['cpus']} CPUs{', quick subset' if meta['quick'] else ''}"
+                        f"{', seed offset ' + str(meta['seed_offset']) if meta['seed_offset'] else ''}):", "", "```",
                         scoring.summary_text(summary), "```", "", scoring.markdown_table(scores, truths), "",
                         "Concealment (training recordings):", "", "```", concealment_table(cases, truths), "```", "",
                         END])

@@ -223,7 +223,7 @@ def test_quick_subset_one_effect_one_null(tmp_path):
                            "--data", str(tmp_path / "data"), "--out", str(out), "--diagnose-arg=--no-plots"],
                           capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
-    res = json.loads((out / "concealed.json").read_text())
+    res = json.loads((out / "concealed-quick.json").read_text())
     by = {c["case"]: c for c in res["cases"]}
     assert set(by) == {c.name for c in C.CASES if c.quick}
     null = by["null_mixed"]
@@ -246,3 +246,13 @@ def test_hidden_effect_is_identifiable_by_an_oracle(name):
                                        "nominal_overrides": case.nominal}, rec)
     true = case.truth[case.effects[0]][main]
     assert est == pytest.approx(true, rel=0.15)
+
+
+def test_scoring_recognises_a_reported_alias():
+    truth = {"case": "a", "effects": ["asymmetric_friction"],
+             "truth": {"asymmetric_friction": {"friction_asymmetry": 0.005}}}
+    report = {"findings": [{"effect": "position_dependent_load", "parameters": {}}],
+              "aliases": [{"effects": ["position_dependent_load", "asymmetric_friction"],
+                           "chosen": "position_dependent_load"}]}
+    s = scoring.score_case(truth, report, {})
+    assert s.missed == ["asymmetric_friction"] and s.aliased == ["asymmetric_friction"] and not s.ok

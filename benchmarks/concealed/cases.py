@@ -96,6 +96,14 @@ def _mixed(duration, seed, span=1.0, speeds=(0.05, 0.2, 0.6), **kw):
     return ex.sequence(ex.sweep(0.4 * T, speeds=speeds, span=span), ex.gait(0.6 * T, seed, **kw))
 
 
+def _mixed_holds(duration, seed, span=1.0, speeds=(0.05, 0.2, 0.6), hold=2.0, **kw):
+    """Like ``mixed`` but with standstill holds at three angles between the parts (what separates
+    direction-dependent friction from a constant or angle-dependent load)."""
+    T = _parts(duration, 5) - 3 * hold
+    return ex.sequence(ex.hold(hold, 0.4 * span), ex.sweep(0.4 * T, speeds=speeds, span=span),
+                       ex.hold(hold, -0.5 * span), ex.gait(0.6 * T, seed, **kw), ex.hold(hold, 0.1 * span))
+
+
 def _gait(duration, seed, **kw):
     return ex.sequence(ex.gait(_parts(duration, 1), seed, **kw))
 
@@ -117,7 +125,7 @@ def _sweep(duration, seed, span=1.2, speeds=(0.05, 0.15, 0.4, 1.0)):
 
 
 BUILDERS: dict[str, Callable[..., np.ndarray]] = {
-    "mixed": _mixed, "gait": _gait, "multisine": _multisine, "swings": _swings, "sweep": _sweep,
+    "mixed": _mixed, "mixed_holds": _mixed_holds, "gait": _gait, "multisine": _multisine, "swings": _swings, "sweep": _sweep,
 }
 
 
@@ -222,7 +230,8 @@ CASES: tuple[Case, ...] = (
          train=Excitation("mixed", 40.0, 3, {"speeds": (0.03, 0.1, 0.3, 0.8)}), seed=2),
     Case("asymmetric", ("asymmetric_friction",), "friction is direction dependent (+/- differ by 2 x 0.005 N·m)",
          {"asymmetric_friction": {"friction_asymmetry": 0.005}},
-         plant={"asymmetry": 0.005}, nominal={"effects.coulomb_friction": F_C}, seed=3),
+         plant={"asymmetry": 0.005}, nominal={"effects.coulomb_friction": F_C},
+         train=Excitation("mixed_holds", 40.0, 3), seed=3),
     Case("viscous", ("viscous_friction",), "viscous drag 20 x the datasheet value",
          {"viscous_friction": {"viscous_damping": 2.1e-4}},
          plant={"b": 2.1e-4}, seed=4),
@@ -261,7 +270,7 @@ CASES: tuple[Case, ...] = (
          nominal={"thermal.initial_winding_temperature": 75.0, "thermal.initial_housing_temperature": 75.0,
                   "thermal.housing_to_ambient_resistance": 0.25},
          train=Excitation("gait", 80.0, 13, {"amplitude": 0.6, "freq": 1.5}),
-         heldout=Excitation("multisine", 40.0, 14), channel="voltage_q", seed=11),
+         heldout=Excitation("gait", 40.0, 14, {"amplitude": 0.5, "freq": 1.3}), channel="voltage_q", seed=11),
     Case("v_saturation", ("voltage_saturation",),
          "the drive's modulator reaches only 80 % of the SVPWM circle (dead time, current sampling window)",
          {"voltage_saturation": {"voltage_limit_ratio": 0.80}},
@@ -290,6 +299,16 @@ CASES: tuple[Case, ...] = (
          nominal={"load.load_torque": 12.0}, train=Excitation("gait", 80.0, 25, {"amplitude": 0.35}),
          heldout=Excitation("multisine", 40.0, 26), seed=23),
 )
+
+
+def reseeded(case: Case, offset: int) -> Case:
+    """The same case with fresh noise and excitation seeds (``offset`` 0 = the published seeds): a check
+    that the diagnoser was not tuned to one draw of the noise or one trajectory."""
+    if not offset:
+        return case
+    return replace(case, seed=case.seed + 1000 * offset,
+                   train=replace(case.train, seed=case.train.seed + 1000 * offset),
+                   heldout=replace(case.heldout, seed=case.heldout.seed + 1000 * offset))
 
 
 def get_case(name: str) -> Case:

@@ -84,6 +84,11 @@ def _ripple(params: dict, nominal: dict):
         return abs(a)
     import re
 
+    for key, val in params.items():  # the pipeline's sensor-offset form: q-current amplitude [A]
+        if re.fullmatch(r"(?:.*\.)?sensor_offset_order_\d+_amplitude", key):
+            v = _num(val)
+            if v is not None:
+                return abs(v)
     for key, val in params.items():  # the pipeline's "ripple_order_<o>_amplitude" [N·m] (not the per-amp variant)
         if re.fullmatch(r"(?:.*\.)?ripple_order_\d+_amplitude", key) and nominal.get("motor.torque_constant_q"):
             v = _num(val)
@@ -160,6 +165,7 @@ class CaseScore:
     verdict_text: str | None = None
     error: str | None = None
     false_positive_detail: list[dict] = field(default_factory=list)
+    aliased: list[str] = field(default_factory=list)   #: missed, but reported as aliased with a named effect
 
     @property
     def is_null(self) -> bool:
@@ -194,6 +200,11 @@ def score_case(truth: dict, report: dict | None, nominal_flat: dict, *, wall_tim
     timing = report.get("timing")
     if isinstance(timing, dict):
         cs.diagnose_time_s = _num(timing.get("total"))
+    for group in report.get("aliases") or []:
+        members = group.get("effects", []) if isinstance(group, dict) else []
+        for e in missed:
+            if e in members and any(m in names for m in members) and e not in cs.aliased:
+                cs.aliased.append(e)
     for f in findings:
         if f["effect"] in fps:
             cs.false_positive_detail.append({k: f.get(k) for k in ("effect", "parameters", "evidence", "held_out")})
@@ -238,6 +249,7 @@ def summarise(scores: list[CaseScore]) -> dict:
         "mean_parameter_error": sum(errs) / len(errs) if errs else None,
         "median_parameter_error": sorted(errs)[len(errs) // 2] if errs else None,
         "mean_held_out_improvement": sum(improvements) / len(improvements) if improvements else None,
+        "missed_but_reported_aliased": sum(len(s.aliased) for s in effect_cases),
         "errors": sum(s.error is not None for s in scores),
         "mean_wall_time_s": sum(times) / len(times) if times else None,
         "max_wall_time_s": max(times) if times else None,
@@ -267,6 +279,8 @@ def rows(scores: list[CaseScore], truths: dict[str, dict]) -> list[list[str]]:
         else:
             verdict = "ok" if s.ok else ("missed" if s.missed and not s.false_positives else
                                         "extra" if not s.missed else "missed+extra")
+            if s.aliased:
+                verdict += f" (alias reported: {', '.join(s.aliased)})"
         params, errs, held = [], [], []
         for e in s.effects:
             params.append(f"{_fmt(e.true_value)}→{_fmt(e.estimate)}")
@@ -318,7 +332,8 @@ def summary_text(summary: dict) -> str:
             f"({pct(summary['detection_rate'])}); cases fully correct: {summary['cases_fully_correct']}/"
             f"{summary['cases']}\n"
             f"false positives on the {summary['null_cases']} null cases: {summary['false_positives_on_nulls']}; "
-            f"extra effects named on effect cases: {summary['extra_effects_on_effect_cases']}\n"
+            f"extra effects named on effect cases: {summary['extra_effects_on_effect_cases']}; missed but reported "
+            f"as aliased with a named effect: {summary.get('missed_but_reported_aliased', 0)}\n"
             f"main-parameter error: mean {pct(summary['mean_parameter_error'])}, median "
             f"{pct(summary['median_parameter_error'])} over {summary['parameters_scored']} scored parameters; "
             f"mean held-out improvement of the named hidden effects: {pct(summary['mean_held_out_improvement'])}\n"
