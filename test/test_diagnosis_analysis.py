@@ -315,3 +315,35 @@ def test_every_effect_identifier_of_the_issue_is_a_candidate():
                  "resistance_temperature", "magnet_temperature", "thermal_parameters", "iron_loss",
                  "magnetic_saturation", "voltage_saturation", "dead_time", "current_loop_delay"):
         assert name in EFFECT_NAMES
+
+
+def test_thermal_network_error_is_found_from_recorded_temperatures():
+    """Heating at a stalled rotor (20 Hz log, 4 min): R_wh and R_ha twice/1.5x the nominal are refitted by
+    simulating the network from the measured current; iron loss is tested and rejected."""
+    nom = ActuatorParams().replace(**{"drive.current_loop_rate": 1000.0, "drive.current_loop_bandwidth": 100.0,
+                                      "motor.rotor_inertia": 1.0, "motor.viscous_damping": 1.0,
+                                      "thermal.winding_heat_capacity": 10.0, "thermal.housing_heat_capacity": 60.0})
+    truth = nom.replace(**{"thermal.winding_to_housing_resistance": 2.0, "thermal.housing_to_ambient_resistance": 3.0})
+    rng = np.random.default_rng(0)
+    act = Actuator(truth)
+    rate, n = 20.0, 4800
+    t = np.arange(n) / rate
+    cmd = np.where((t % 60) < 40, 12.0, 2.0) * np.sign(np.sin(2 * np.pi * t / 7.3) + 0.01)
+    ch = {k: np.zeros(n) for k in ("current_command", "current", "position", "voltage_q", "winding_temperature",
+                                   "housing_temperature")}
+    for k in range(n):
+        s = act.state
+        ch["current_command"][k], ch["current"][k] = cmd[k], s.i_q + 0.02 * rng.standard_normal()
+        ch["position"][k], ch["voltage_q"][k] = s.theta, s.v_q + 0.01 * rng.standard_normal()
+        ch["winding_temperature"][k] = s.T_winding + 0.05 * rng.standard_normal()
+        ch["housing_temperature"][k] = s.T_housing + 0.05 * rng.standard_normal()
+        act.set_current_command(cmd[k])
+        act.step(1 / rate)
+    rep = diagnose(Signals(t, ch, source="thermal"), nom, options=DiagnoseOptions(replay=False))
+    assert rep.effects == ["thermal_parameters"], rep.effects
+    f = rep.finding("thermal_parameters")
+    assert f["parameters"]["winding_to_housing_resistance"] == pytest.approx(2.0, rel=0.05)
+    assert f["parameters"]["housing_to_ambient_resistance"] == pytest.approx(3.0, rel=0.05)
+    assert f["held_out"]["after"] < 0.2 * f["held_out"]["before"]
+    assert rep.updated_params.thermal.winding_to_housing_resistance == pytest.approx(2.0, rel=0.05)
+    assert any(r["effect"] == "iron_loss" for r in rep.rejected)

@@ -301,10 +301,6 @@ def v_stribeck(ctx, loc):
     out = []
     for ws in np.geomspace(lo, hi, 6):
         ws = float(ws)
-
-        def rebuild(c, value):
-            return {"stribeck": col_stribeck(value)}
-
         out.append(Variant("stribeck_friction", f"omega_s={ws:.3g} rad/s", {f"stribeck@{ws:.6g}": col_stribeck(ws)},
                            hyper={"omega_s": ws},
                            nonlinear={"omega_s": (ws, lo / 2, hi * 2, lambda c, v: {f"stribeck@{ws:.6g}": col_stribeck(v)})}))

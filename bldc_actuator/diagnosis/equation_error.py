@@ -458,7 +458,18 @@ def _derive(ctx: Context) -> None:
                 break
         S["theta"] = th
         ctx.valid["theta"] = ctx.valid["position"]
-    if "position" in have and not ctx.steady:
+    use_pos = "position" in have and not ctx.steady
+    if use_pos and "velocity" in have:
+        # the two must agree in scale before the angle may stand in for the speed
+        w_pos = _gradient(S["theta"], t, segs)
+        ok = ctx.valid["position"] & ctx.valid["velocity"]
+        a, b = ctx.dec.lowpass(w_pos)[ok], ctx.dec.lowpass(raw["velocity"])[ok]
+        ratio = float(a @ b / (b @ b)) if len(b) and (b @ b) > 0 else 1.0
+        if not 0.9 <= ratio <= 1.1:
+            use_pos = False
+            ctx.notes.append(f"d(position)/dt is {ratio:.3g} x the velocity channel: speed taken from the velocity "
+                             f"channel; angle-dependent effects use the position as recorded")
+    if use_pos:
         # central differences of the angle: no delay (a drive's velocity is often a backward difference,
         # half a sample late, which looks like a resistance error in the voltage equation)
         S["omega"] = _gradient(S["theta"], t, segs)

@@ -22,7 +22,6 @@ Usage::
 
 from __future__ import annotations
 
-import math
 import sys
 import time
 from dataclasses import dataclass, field

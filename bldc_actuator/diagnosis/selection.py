@@ -16,7 +16,6 @@ A backward check at the end drops an accepted effect that later ones made redund
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
