@@ -168,6 +168,17 @@ class _Coeffs:
         return hit
 
 
+def thermal_step_matrices(thermal, h: float):
+    """Exact discretisation of the two-node thermal network (:class:`~bldc_actuator.params.ThermalParams`)
+    over ``h`` seconds for constant Joule power P, with ``y`` = temperatures above ambient:
+    ``y_w' = p11 y_w + p12 y_h + G1 P``, ``y_h' = p21 y_w + p22 y_h + G2 P``. Returns
+    ``(p11, p12, p21, p22, G1, G2)``: the same matrices the simulator uses (floats or, for array
+    parameters, arrays)."""
+    ops = _ArrayOps if isinstance(thermal.winding_heat_capacity, np.ndarray) else _ScalarOps
+    return _thermal_matrices(thermal.winding_to_housing_resistance, thermal.housing_to_ambient_resistance,
+                             thermal.winding_heat_capacity, thermal.housing_heat_capacity, h, ops)[:6]
+
+
 def _thermal_matrices(R_wh, R_ha, C_w, C_h, h, ops):
     """``y(h) = Φ y(0) + Γ P`` for ``dy/dt = A y + g P`` (y = temperatures above ambient), and
     ``∫y dt = A⁻¹ (y(h) - y(0) - g P h)``. Closed-form 2×2 exponential (Sylvester): the passive RC
@@ -605,6 +616,23 @@ class BatchActuator(_Base):
 
     def __len__(self) -> int:
         return len(self.params)
+
+    def set_state(self, *, i_d, i_q, omega, theta, T_winding, T_housing, v_d=0.0, v_q=0.0, z_d=0.0, z_q=0.0,
+                  i_q_ref=0.0) -> None:
+        """Set the state of every element (arrays of length ``len(self)`` or scalars), e.g. to start
+        simulation windows from measured states (multiple shooting). The command is set to ``i_q_ref``."""
+        n = len(self)
+        arr = lambda x: np.broadcast_to(np.asarray(x, dtype=float), (n,)).copy()  # noqa: E731
+        s = self._s
+        s.i = arr(i_d) + 1j * arr(i_q)
+        s.omega, s.theta = arr(omega), arr(theta)
+        s.T_w, s.T_h = arr(T_winding), arr(T_housing)
+        s.v = arr(v_d) + 1j * arr(v_q)
+        s.z = arr(z_d) + 1j * arr(z_q)
+        s.i_ref = arr(i_q_ref)
+        s.cmd_q = arr(i_q_ref)
+        s.acc = np.zeros(n)
+        s.v_cmd = None
 
     def set_current_command(self, i_q_ref) -> None:
         self._s.cmd_q = np.broadcast_to(np.asarray(i_q_ref, dtype=float), (len(self),)).copy()

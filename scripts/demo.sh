@@ -11,6 +11,7 @@ if [[ -n "${_ROS_WHEELS_BOOTSTRAP_COMPLETE:-}" ]]; then
     unset _ROS_WHEELS_BOOTSTRAP_COMPLETE LD_LIBRARY_PATH
 fi
 export MPLBACKEND="${MPLBACKEND:-Agg}"
+export OPENBLAS_NUM_THREADS="${OPENBLAS_NUM_THREADS:-1}"
 
 cd "$REPO"
 exec "$VENV/bin/bldc-actuator" demo "$@"

@@ -15,6 +15,8 @@ if [[ -n "${_ROS_WHEELS_BOOTSTRAP_COMPLETE:-}" ]]; then
     unset _ROS_WHEELS_BOOTSTRAP_COMPLETE LD_LIBRARY_PATH
 fi
 export MPLBACKEND="${MPLBACKEND:-Agg}"
+# numpy's OpenBLAS thread pool makes small products far slower on a busy 2-core machine
+export OPENBLAS_NUM_THREADS="${OPENBLAS_NUM_THREADS:-1}"
 
 cd "$REPO"
 set +e

@@ -370,3 +370,28 @@ def test_bad_inputs_name_the_field():
         act.set_current_command(float("nan"))
     with pytest.raises(ValueError, match="dt"):
         act.step(-1.0)
+
+
+def test_batch_set_state_matches_scalar_set_state():
+    from bldc_actuator.model import ActuatorState
+    p = rich_params()
+    st = dict(i_d=0.1, i_q=2.0, omega=30.0, theta=1.2, T_winding=40.0, T_housing=30.0, v_d=-0.5, v_q=3.0,
+              z_d=0.0, z_q=0.4, i_q_ref=2.5)
+    b = BatchActuator([p, p])
+    b.set_state(**st)
+    a = Actuator(p, ActuatorState(**st))
+    a.set_current_command(2.5)
+    a.step(0.02)
+    b.step(0.02)
+    assert b.outputs()["omega"][1] == pytest.approx(a.state.omega, rel=1e-9)
+    assert b.outputs()["T_winding"][0] == pytest.approx(a.state.T_winding, rel=1e-12)
+
+
+def test_public_thermal_matrices_match_expm():
+    from bldc_actuator.model import thermal_step_matrices
+    th = ActuatorParams().thermal
+    p11, p12, p21, p22, G1, G2 = thermal_step_matrices(th, 3.0)
+    A = thermal_matrix(th)
+    assert np.allclose([[p11, p12], [p21, p22]], expm(3.0 * A), rtol=1e-12)
+    G = np.linalg.solve(A, (expm(3.0 * A) - np.eye(2)) @ np.array([1 / th.winding_heat_capacity, 0.0]))
+    assert np.allclose([G1, G2], G, rtol=1e-10)
