@@ -102,6 +102,42 @@ def ak80_angle(data: Path, out: Path) -> dict:
             "report": d, "static_ratio": ratio_static}
 
 
+# -- AK80-9 MIT torque log with motion both ways: direction-dependent torque -----------------------
+
+FRICTION_EFFECTS = ["coulomb_friction", "asymmetric_friction", "viscous_friction", "stribeck_friction",
+                    "torque_constant_error", "magnetic_saturation"]
+
+
+def ak80_direction(data: Path, out: Path) -> dict:
+    name = "ak80-9/sysid_final/trial8"
+    s = realdata.load_dataset(name, data)
+    prm = P.load_preset("ak80_9")
+    rep = diagnose(s, prm, options=DiagnoseOptions(effects=FRICTION_EFFECTS))
+    d = rep.to_dict()
+    tag = "ak80_9_sysid_trial8"
+    rep.write_json(out / f"{tag}.json")
+    rep.write_markdown(out / tag)
+    found, params_txt, heldout, ff = [], [], [], "—"
+    for f in d["findings"]:
+        pr, un = f["parameters"], f["uncertainty"]
+        found.append(f["effect"])
+        params_txt.append(", ".join(f"{k} {_pm(v, un.get(k) or 0.0)}" for k, v in pr.items()
+                                    if isinstance(v, (int, float)) and k != "frame_factor"))
+        if "ratio_to_nominal" in pr:
+            ff = f"K_t ratio {pr['ratio_to_nominal']:.3f} → {pr.get('frame_factor', 'none')}"
+        h = f["held_out"]
+        heldout.append(f"{f['effect']}: {h['before']:.3g} → {h['after']:.3g} A")
+    rejected = [f"{r['effect']} ({r.get('reason', '')})" for r in d["rejected"]
+                if r["effect"] in ("coulomb_friction", "asymmetric_friction")]
+    return {"dataset": name, "demo": "direction-dependent torque (pipeline, Futek, motion both ways)",
+            "found": ("; ".join(found) or "nothing") + (
+                "; direction-dependent torque NOT accepted: " + "; ".join(rejected) if rejected else ""),
+            "parameters": "; ".join(params_txt) or "—", "frame_factor": ff,
+            "held_out": "; ".join(heldout) or "—",
+            "not_checked": "; ".join(f"{x['effect']}: {x['reason']}" for x in d["not_checkable"]) or "—",
+            "report": d}
+
+
 # -- AK80-9 servo efficiency runs: steady-state fits + voltage saturation --------------------------
 
 def ak80_servo(data: Path, out: Path) -> dict:
@@ -230,10 +266,71 @@ def d5065(data: Path, out: Path) -> dict:
 
 
 def interpretation(rows: list[dict]) -> list[str]:
-    return []
+    """A short, honest reading of each row (numbers from this run)."""
+    by = {r["dataset"]: r for r in rows}
+    L = ["## Interpretation", ""]
+    r = by.get("ak80-9/torque_vs_angle/synchronized_trial_4")
+    if r:
+        L += ["**AK80-9 torque vs angle (trial 4).** The angle-order spectrum of the torque-balance residual "
+              "(Futek against K_t·N·i_q) peaks at orders 42 (= 2p), 21 (= p, once per electrical turn), 126 "
+              "(= 6p) and 84 per motor revolution: torque ripple locked to the electrical angle, as expected "
+              "for a 21-pole-pair motor. The pipeline, restricted to the angle-dependent candidates (current "
+              "is constant here, so a torque-constant error, saturation and a constant load are the same "
+              "column and cannot be told apart), accepts the rig's once-per-output-turn load, a cogging-like "
+              "order-42 term and the order-21 electrical-angle ripple, each improving the angle-synchronous "
+              "held-out residual (numbers in the table, in current units = torque / K_t). Order 42 is also "
+              "2p, so 'cogging' and second-harmonic electrical ripple are aliased in this data; "
+              "lcm(36 slots, 42 poles) = 252 is not among the peaks. Direction-dependent torque cannot be "
+              f"checked: all trials back-drive the same way. The static ratio {r['static_ratio']:.3f} of "
+              "Futek to K_t_q·N·i (driver amperes, not converted) mixes the frame factor (√(3/2) = 1.225 if "
+              "the driver current is amplitude-invariant) with back-drive friction and gear efficiency.", ""]
+    r = by.get("ak80-9/sysid_final/trial8")
+    if r:
+        L += ["**AK80-9 MIT torque log (trial 8, motion both ways).** Direction-dependent friction is tested "
+              "here instead, where the output moves in both directions: Coulomb and asymmetric friction are "
+              "*not* accepted (ΔBIC below the gate), so the tool says nothing about them rather than guess. "
+              "It does accept a torque-constant error whose ratio to the preset (" + r["frame_factor"] + ") "
+              "matches no frame factor and is 1.4× the locked-rotor Futek slope (0.0877 N·m/A motor side): "
+              "unexplained, probably the rig (Futek also carries the antagonist's inertial torque while "
+              "the output accelerates, and the current clips at ±12.97 A). Not trusted as a K_t estimate.", ""]
+    r = by.get("ak80-9/servo_efficiency")
+    if r:
+        rep = r["report"]
+        vs = rep["voltage_saturation"]
+        L += ["**AK80-9 servo efficiency runs.** Steady-state fits, each file held out in turn. The voltage "
+              "equation v_q = R·i_q + K_b·ω fits well (held-out RMS drops ~3.5×): R ≈ 0.17 Ω (the hot "
+              "winding + FETs, inside the SOURCE.txt 0.18–0.21 range's neighbourhood), but K_b is "
+              f"{rep['back_emf_frame_factor']['ratio']:.3f}× the preset's K_t_q, which matches no frame "
+              "factor — consistent with docs/presets.md's warning that the driver's v_q scale itself is in "
+              f"doubt. Voltage saturation is seen directly: {vs['samples_at_duty_cap']} samples sit at the "
+              f"0.90 duty cap, where the speed falls {100 * vs['median_speed_shortfall_at_cap']:.0f} % short of "
+              f"its set-point (median; {100 * vs['median_speed_shortfall_below']:.0f} % below the cap). The "
+              "Futek-vs-current fit on these runs is poor (velocity steps against a passive antagonist: the "
+              "torque is mostly transient, 10–20 Hz sampling) and its ratio is not used for the K_t convention; "
+              "the locked-rotor `servo_static_torque` files are the better source (0.0877 N·m/A, see presets).",
+              ""]
+    r = by.get("odrive-d5065/odrive_data")
+    if r:
+        ff = r["report"]["frame_factor_vs_kv"]
+        L += ["**ODrive D5065 dyno map.** τ = K_t·Iq − τ_c·sign(ω) − b·ω, held out by five speed blocks: the "
+              f"fitted K_t is {ff['ratio']:.4f} ± {ff['ratio_sd']:.4f} × the power-invariant K_t_q from "
+              f"Kv 270 — the 2/√3 frame factor to within {100 * abs(ff['deviation_from_nearest']):.2f} %, "
+              f"and {r['report']['ratio_to_8.27_over_kv']:.3f}× ODrive's own 8.27/Kv (per amplitude-invariant "
+              "ampere). Read with care: an amplitude-invariant current predicts √(3/2) (1.225) against K_t_q, "
+              "so 2/√3 here is √(3/2) times a 5.7 % torque loss between the rotor and the absorber-side load "
+              "cell (coupling, bearings) — the match is exact numerically, but the two explanations are "
+              "aliased without a torque reading at the rotor. Friction: a constant drag τ_c ≈ 0.013 N·m "
+              "(one direction only, so it is also a sensor offset) plus a small viscous term. Held-out "
+              "torque RMS improves about 5×.", ""]
+    L += ["## Not demonstrated", "",
+          "* MIT (Katz) dyno logs: no phase current is logged (bus current only), so K_t vs Kv needs the "
+          "efficiency-map route (not built); friction_test's torque semantics are inferred, not documented.",
+          "* Direction-dependent torque on the angle trials (one back-drive direction only)."]
+    return L
 
 
 DEMOS = [("ak80-9/torque_vs_angle/synchronized_trial_4", ak80_angle),
+         ("ak80-9/sysid_final/trial8", ak80_direction),
          ("ak80-9/servo_efficiency", ak80_servo),
          ("odrive-d5065/odrive_data", d5065)]
 
