@@ -298,8 +298,8 @@ def interpretation(rows: list[dict]) -> list[str]:
         rep = r["report"]
         vs = rep["voltage_saturation"]
         L += ["**AK80-9 servo efficiency runs.** Steady-state fits, each file held out in turn. The voltage "
-              "equation v_q = R·i_q + K_b·ω fits well (held-out RMS drops ~3.5×): R ≈ 0.17 Ω (the hot "
-              "winding + FETs, inside the SOURCE.txt 0.18–0.21 range's neighbourhood), but K_b is "
+              "equation v_q = R·i_q + K_b·ω fits well (held-out RMS drops ~3.5×): R ≈ 0.17 Ω (winding + "
+              "FETs + leads, slightly below the SOURCE.txt 0.18–0.21 Ω, above Katz' 0.13 Ω), but K_b is "
               f"{rep['back_emf_frame_factor']['ratio']:.3f}× the preset's K_t_q, which matches no frame "
               "factor — consistent with docs/presets.md's warning that the driver's v_q scale itself is in "
               f"doubt. Voltage saturation is seen directly: {vs['samples_at_duty_cap']} samples sit at the "
