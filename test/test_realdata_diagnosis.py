@@ -78,3 +78,20 @@ def test_ak80_servo_voltage_equation_improves(shared_data_dir):
                            kb_nominal=prm.motor.torque_constant_q, groups=seg)
     assert 0.1 < v.value("phase_resistance") < 0.3          # the SOURCE.txt range 0.18-0.21 (hot)
     assert v.heldout_after < 0.5 * v.heldout_before
+
+
+def test_angle_trial_all_effects_no_runaway_torque_constant(shared_data_dir):
+    """With every candidate allowed, the constant-current angle trial must not accept a torque-constant
+    scale that only fits because a constant load runs away with it (they are one column here): the
+    joint fit is checked for plausibility and the selection redone without the implausible term."""
+    from bldc_actuator import params as P
+    from bldc_actuator.diagnosis import realdata
+    from bldc_actuator.diagnosis.pipeline import DiagnoseOptions, diagnose
+
+    s = realdata.load_dataset("ak80-9/torque_vs_angle/synchronized_trial_4", shared_data_dir)
+    rep = diagnose(s, P.load_preset("ak80_9"), options=DiagnoseOptions(progress=False)).to_dict()
+    for f in rep["findings"]:
+        if f["effect"] == "torque_constant_error":
+            assert 0.2 <= f["parameters"]["ratio_to_nominal"] <= 5.0
+    names = {f["effect"] for f in rep["findings"]}
+    assert "electrical_angle_ripple" in names

@@ -246,7 +246,9 @@ def _diagnose(signals, params: ActuatorParams, options: DiagnoseOptions) -> Diag
         exp = lib[A].confusable.get(B) or lib[B].confusable.get(A) or "record data that excites them differently"
         aliases.append({"effects": [A, B], "chosen": a["chosen"], "correlation": a["correlation"],
                         "message": f"cannot tell {A} from {B} with this data (their fitted contributions "
-                                   f"correlate {a['correlation']:.2f}); {a['chosen']} was kept",
+                                   f"correlate {a['correlation']:.2f}); "
+                                   + (f"{a['chosen']} was kept" if a["chosen"] else
+                                      "neither was kept: together they fit implausible values"),
                         "experiment": exp})
     final_metrics = _ee_metrics(ctx, sel.final_fit)
     compare = {"equation_error": {eq: {"nominal": _ee_metrics(ctx, sel.base_fit)[eq], "updated": final_metrics[eq]}

@@ -289,12 +289,30 @@ def forward_select(ctx: Context, loc: dict, lib: dict[str, Candidate], names: li
         weights = _weights(ctx, base)
         base = fit_model(ctx, cols, keys, weights, iterating)
         last_eval.pop(win.effect, None)
-    # backward check: every accepted effect must still earn its place given the others
+    # backward check: every accepted effect must still earn its place given the others, and its parameters
+    # must stay physical in the joint fit (two aliased terms can run away together: with a constant current,
+    # a torque-constant scale and a constant load are one column, and the pair fits any K)
     removed: list[dict] = []
     changed = True
-    while changed and len(accepted) > 1:
+    while changed and accepted:
         changed = False
         for a in list(accepted):
+            idx = [base.keys.index(k) for k in a.added]
+            why = implausible(lib[a.effect], base.beta[idx], base.cov[np.ix_(idx, idx)], a.added, a.variant, ctx)
+            if why:   # select again without it: the others were chosen in its company
+                say(f"backward check: {a.effect} is implausible in the joint fit ({why}); selecting again without it")
+                again = forward_select(ctx, loc, lib, [n for n in names if n != a.effect], gate, progress)
+                again.rejected.append({"effect": a.effect, "form": a.variant.label,
+                                       "reason": f"{why} in the joint fit with the effects accepted after it "
+                                                 f"(aliased with them in this data)"})
+                again.aliases.extend(x for x in aliases if a.effect in x["effects"] and x not in again.aliases)
+                kept = {acc.effect for acc in again.accepted}
+                for x in again.aliases:
+                    if x.get("chosen") == a.effect:
+                        x["chosen"] = next((e for e in x["effects"] if e != a.effect and e in kept), None)
+                return again
+            if len(accepted) < 2:
+                continue
             others = [k for k in keys if k not in a.added]
             f_without = fit_model(ctx, cols, others, weights, iterating)
             db = delta_bic(f_without, base)
