@@ -75,6 +75,8 @@ class _ScalarOps:
     def negate(a):
         return not a
 
+    all_true = any_true = staticmethod(bool)
+
 
 class _ArrayOps:
     cexp = staticmethod(np.exp)
@@ -86,6 +88,8 @@ class _ArrayOps:
     either = staticmethod(np.logical_or)
     both = staticmethod(np.logical_and)
     negate = staticmethod(np.logical_not)
+    all_true = staticmethod(np.all)
+    any_true = staticmethod(np.any)
 
 
 # -- compiled coefficients ----------------------------------------------------------------------------
@@ -139,6 +143,7 @@ class _Coeffs:
         self.tau_asym = e("friction_asymmetry")
         self.tau_s = e("stribeck_friction")
         self.omega_s = e("stribeck_velocity")
+        self.has_stribeck = bool(np.any(self.tau_s))
         self.has_friction = bool(np.any(self.tau_c) or np.any(self.tau_asym) or np.any(self.tau_s))
         self.cog_order = e("cogging_order")
         n_h = max(len(p.effects.cogging_cos) for p in plist)
@@ -386,11 +391,15 @@ def _friction(c: _Coeffs, num, den, w0, h, ops):
     mag = lambda d, speed: effects.friction_magnitude(d, speed, c.tau_c, c.tau_asym, c.tau_s, c.omega_s)  # noqa: E731
     J2h = 2.0 * c.J / h                       # den = J2h + (b - K B); num = J2h w0 + drive(0)
     d0 = ops.sign(w0)
-    F0 = mag(d0, abs(w0))
-    w_pred = (num - d0 * F0) / den
-    F_mov = mag(d0, abs(ops.where(w_pred * w0 > 0.0, w_pred, 0.5 * w0)))
+    F_mov = mag(d0, abs(w0))
+    if c.has_stribeck:
+        w_pred = (num - d0 * F_mov) / den
+        F_mov = mag(d0, abs(ops.where(w_pred * w0 > 0.0, w_pred, 0.5 * w0)))
     w_mov = (num - d0 * F_mov) / den
     crossed = ops.both(w0 * (2.0 * w_mov - w0) < 0.0, F_mov > 0.0)
+    moving = w0 != 0.0
+    if ops.all_true(moving) and not ops.any_true(crossed):   # the common case: sliding on
+        return w_mov, d0 * F_mov
     # drive torque (everything but friction and inertia) at the crossing, w ~ 0: num - J2h w0 - (den - J2h)*0
     drive = num - J2h * w0
     push = ops.sign(drive)
@@ -401,7 +410,6 @@ def _friction(c: _Coeffs, num, den, w0, h, ops):
     f_cross = (t_star * d0 * F_mov + (h - t_star) * push * F_st) / h
     w_rev = (num - f_cross) / den
     reverses = ops.both(crossed, ops.both(breaks, push == -d0))
-    moving = w0 != 0.0
     w = ops.where(moving,
                   ops.where(reverses, w_rev, ops.where(crossed, 0.5 * w0, w_mov)),
                   ops.where(breaks, (num - push * F_st) / den, 0.0 * w0))
