@@ -248,9 +248,13 @@ def update_doc(path: Path, meta, summary, scores, truths, cases) -> None:
 
 
 def _git_head() -> str:
+    """Short commit, with ``+uncommitted diagnosis`` when the diagnoser's files differ from it."""
     try:
-        return subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", "HEAD"], capture_output=True,
+        head = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", "HEAD"], capture_output=True,
                               text=True, timeout=10).stdout.strip() or "?"
+        dirty = subprocess.run(["git", "-C", str(REPO), "status", "--porcelain", "bldc_actuator"],
+                               capture_output=True, text=True, timeout=10).stdout.strip()
+        return head + (" +uncommitted bldc_actuator changes" if dirty else "")
     except OSError:
         return "?"
 

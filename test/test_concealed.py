@@ -256,3 +256,9 @@ def test_scoring_recognises_a_reported_alias():
                            "chosen": "position_dependent_load"}]}
     s = scoring.score_case(truth, report, {})
     assert s.missed == ["asymmetric_friction"] and s.aliased == ["asymmetric_friction"] and not s.ok
+    assert not s.ok_with_aliases                      # the case did not declare this alias acceptable
+    truth["alias_ok"] = {"asymmetric_friction": ["position_dependent_load"]}
+    s = scoring.score_case(truth, report, {})
+    assert s.alias_accepted == ["asymmetric_friction"] and s.ok_with_aliases and not s.ok
+    report["findings"].append({"effect": "viscous_friction", "parameters": {}})
+    assert not scoring.score_case(truth, report, {}).ok_with_aliases   # a real extra is still an extra
