@@ -5,20 +5,7 @@
 #                                                    ROS domain-id range, see test/conftest.py)
 #        bash scripts/test.sh -m "not slow"
 set -euo pipefail
-REPO="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-VENV="$(bash "$REPO/scripts/setup_env.sh")"
-
-# Never let DDS discovery leave this host.
-export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
-# The venv's interpreter bootstraps its own LD_LIBRARY_PATH; drop another ROS-wheels venv's state.
-if [[ -n "${_ROS_WHEELS_BOOTSTRAP_COMPLETE:-}" ]]; then
-    unset _ROS_WHEELS_BOOTSTRAP_COMPLETE LD_LIBRARY_PATH
-fi
-export MPLBACKEND="${MPLBACKEND:-Agg}"
-# numpy's OpenBLAS thread pool makes small products far slower on a busy 2-core machine
-export OPENBLAS_NUM_THREADS="${OPENBLAS_NUM_THREADS:-1}"
-
-cd "$REPO"
+source "$(dirname "${BASH_SOURCE[0]}")/env.sh"
 set +e
 "$VENV/bin/python" -m pytest test "$@"
 rc=$?
