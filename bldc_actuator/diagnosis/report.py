@@ -323,26 +323,31 @@ def _plot_jobs(r: DiagnosisReport, d: Path) -> list:
         axes[-1, 0].set_xlabel("time [s] (green: held-out, red: located windows)")
         return _save(fig, d, "residual_time.png", "Equation-error residual vs time")
 
-    if "omega_s" in ctx.sig:
-        @job
-        def residual_velocity():
-            w = ctx.dsig("omega_s")
-            fig, axes = plt.subplots(1, len(eqs), figsize=(5 * len(eqs), 3.5), squeeze=False)
-            for ax, eq in zip(axes[0], eqs):
-                B = ctx.blocks[eq]
-                k = _thin(len(t), 4000)
-                v = B.valid[k]
-                ax.plot(w[k][v], base.resid[eq][k][v], ".", ms=1.5, color="0.6", label="nominal")
-                if r.findings:
-                    ax.plot(w[k][v], final.resid[eq][k][v], ".", ms=1.5, color="C0", alpha=0.5, label="updated")
-                bins = ((r.locate.get(eq) or {}).get("bins") or {}).get("velocity") or []
-                xs = [np.clip(0.5 * (b["lo"] + b["hi"]), np.nanmin(w), np.nanmax(w)) for b in bins if b["count"]]
+    def residual_scatter(x, xlabel, height, bins_key=None):
+        """Nominal (and updated) residual of every equation against one signal, with locate's bin means."""
+        fig, axes = plt.subplots(1, len(eqs), figsize=(5 * len(eqs), height), squeeze=False)
+        for ax, eq in zip(axes[0], eqs):
+            B = ctx.blocks[eq]
+            k = _thin(len(t), 4000)
+            v = B.valid[k]
+            ax.plot(x[k][v], base.resid[eq][k][v], ".", ms=1.5, color="0.6", label="nominal")
+            if r.findings:
+                ax.plot(x[k][v], final.resid[eq][k][v], ".", ms=1.5, color="C0", alpha=0.5, label="updated")
+            if bins_key:
+                bins = ((r.locate.get(eq) or {}).get("bins") or {}).get(bins_key) or []
+                xs = [np.clip(0.5 * (b["lo"] + b["hi"]), np.nanmin(x), np.nanmax(x)) for b in bins if b["count"]]
                 ys = [b["mean"] for b in bins if b["count"]]
                 ax.plot(xs, ys, "o-", color="C3", label="bin means (nominal)")
                 ax.axhline(0, color="k", lw=0.5)
-                ax.set_xlabel("rotor speed [rad/s]")
-                ax.set_ylabel(f"{eq} residual [{B.unit.split(' ')[0]}]")
-                ax.legend(fontsize=7)
+            ax.set_xlabel(xlabel)
+            ax.set_ylabel(f"{eq} residual [{B.unit.split(' ')[0]}]")
+            ax.legend(fontsize=7)
+        return fig
+
+    if "omega_s" in ctx.sig:
+        @job
+        def residual_velocity():
+            fig = residual_scatter(ctx.dsig("omega_s"), "rotor speed [rad/s]", 3.5, "velocity")
             return _save(fig, d, "residual_velocity.png", "Residual vs speed")
 
     spec = (r.locate.get("mechanical") or {}).get("order_spectrum") or {}
@@ -393,18 +398,7 @@ def _plot_jobs(r: DiagnosisReport, d: Path) -> list:
     if any(c in ctx.have for c in ("winding_temperature", "housing_temperature")):
         @job
         def residual_temperature():
-            T = ctx.dsig("T_w")
-            fig, axes = plt.subplots(1, len(eqs), figsize=(5 * len(eqs), 3.2), squeeze=False)
-            for ax, eq in zip(axes[0], eqs):
-                B = ctx.blocks[eq]
-                k = _thin(len(t), 4000)
-                v = B.valid[k]
-                ax.plot(T[k][v], base.resid[eq][k][v], ".", ms=1.5, color="0.6", label="nominal")
-                if r.findings:
-                    ax.plot(T[k][v], final.resid[eq][k][v], ".", ms=1.5, color="C0", alpha=0.5, label="updated")
-                ax.set_xlabel("winding temperature [°C]")
-                ax.set_ylabel(f"{eq} residual [{B.unit.split(' ')[0]}]")
-                ax.legend(fontsize=7)
+            fig = residual_scatter(ctx.dsig("T_w"), "winding temperature [°C]", 3.2)
             return _save(fig, d, "residual_temperature.png", "Residual vs temperature")
 
     rp = I.get("replay_ho")
