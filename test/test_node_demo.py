@@ -57,3 +57,26 @@ def test_demo_is_registered_as_a_subcommand():
 
     args = build_parser().parse_args(["demo", "--preset", "ak80_9", "--out", "x", "--no-plot"])
     assert args.command == "demo" and args.preset == "ak80_9" and args.func.__module__ == "bldc_actuator.demo"
+
+
+def test_node_recording_diagnosed_closes_the_loop(tmp_path):
+    """A node run whose motor has twice the preset's Coulomb friction, diagnosed against the preset: the
+    recording alone names coulomb_friction, fits it near the truth, and the updated parameter file loads."""
+    from bldc_actuator.diagnosis.cleaning import clean
+    from bldc_actuator.diagnosis.loaders import load
+    from bldc_actuator.diagnosis.pipeline import DiagnoseOptions, diagnose
+    from bldc_actuator.params import dump_yaml, load_yaml
+
+    nominal = load_preset("ak80_9")
+    true_tau_c = 2.0 * nominal.effects.coulomb_friction
+    truth = tmp_path / "truth.yaml"
+    dump_yaml(nominal.replace(**{"effects.coulomb_friction": true_tau_c}), truth)
+    run_demo(str(truth), tmp_path, domain_id=next_domain_id(), plot=False)
+    sig = clean(load(tmp_path / "demo.mcap", params=nominal), params=nominal)
+    rep = diagnose(sig, nominal, options=DiagnoseOptions(progress=False))
+    assert [f["effect"] for f in rep.to_dict()["findings"]] == ["coulomb_friction"]
+    fitted = rep.finding("coulomb_friction")["parameters"]["coulomb_friction"]
+    assert fitted == pytest.approx(true_tau_c, rel=0.15)
+    out = tmp_path / "fitted.yaml"
+    rep.write_params(out)
+    assert load_yaml(out).effects.coulomb_friction == pytest.approx(fitted)
