@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from typing import Optional, TextIO
 
 from . import frames
+from .params import yaml_scalar
 
 PAPER_DOC = "docs/paper-discrepancies.md"
 
@@ -302,15 +303,6 @@ def _param_lines(res: WindingResult, pole_pairs: Optional[int]) -> list[str]:
     return out
 
 
-def _yaml_double(x: float) -> str:
-    """A YAML double that every parser reads as a float: has a '.' in the mantissa (24.0, 1.5e-05 -> 1.5e-05)."""
-    s = f"{x:.12g}"
-    mant, _, exp = s.partition("e")
-    if "." not in mant:
-        mant += ".0"
-    return mant + (f"e{exp}" if exp else "")
-
-
 def yaml_snippet(res: WindingResult, pole_pairs: Optional[int], command: str = "") -> str:
     """ROS 2 parameter-file snippet with the motor.* q-axis parameters."""
     lines = []
@@ -321,11 +313,11 @@ def yaml_snippet(res: WindingResult, pole_pairs: Optional[int], command: str = "
     if pole_pairs is not None:
         lines.append(f"      pole_pairs: {int(pole_pairs)}")
     if res.r_phase is not None:
-        lines.append(f"      phase_resistance: {_yaml_double(res.r_phase)}")
+        lines.append(f"      phase_resistance: {yaml_scalar(float(res.r_phase))}")
     if res.l_q is not None:
-        lines.append(f"      q_inductance: {_yaml_double(res.l_q)}")
+        lines.append(f"      q_inductance: {yaml_scalar(float(res.l_q))}")
     if res.k_q is not None:
-        lines.append(f"      torque_constant_q: {_yaml_double(res.k_q)}")
+        lines.append(f"      torque_constant_q: {yaml_scalar(float(res.k_q))}")
     return "\n".join(lines) + "\n"
 
 

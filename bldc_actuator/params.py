@@ -411,7 +411,8 @@ def load_yaml(path: str | Path, *, base: ActuatorParams | None = None) -> Actuat
         raise ParameterError(exc.field, f"{exc.args[0].split(': ', 1)[1]} (in {path})") from None
 
 
-def _yaml_scalar(value: Any) -> str:
+def yaml_scalar(value: Any) -> str:
+    """One YAML scalar as ROS reads it: doubles always carry a '.' in the mantissa (24.0, 6.0e-05)."""
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, float):
@@ -421,7 +422,7 @@ def _yaml_scalar(value: Any) -> str:
             mantissa += ".0"
         return mantissa + e + exponent
     if isinstance(value, tuple):
-        return "[" + ", ".join(_yaml_scalar(float(v)) for v in value) + "]"
+        return "[" + ", ".join(yaml_scalar(float(v)) for v in value) + "]"
     return str(value)
 
 
@@ -441,7 +442,7 @@ def dump_yaml(params: ActuatorParams, path: str | Path | None = None, *, header:
             if spec.type is tuple and not value:
                 lines.append(f"      {f.name}: []{comment}")
             else:
-                lines.append(f"      {f.name}: {_yaml_scalar(value)}{comment}")
+                lines.append(f"      {f.name}: {yaml_scalar(value)}{comment}")
     text = "\n".join(lines) + "\n"
     if path is not None:
         Path(path).write_text(text)
