@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))
-from test_model import rich_params, trajectories  # noqa: E402  (the exact scenarios the tests use)
+from test_model import rich_params, step_size_errors  # noqa: E402  (the exact scenarios the tests use)
 
 from bldc_actuator import frames, profiles  # noqa: E402
 from bldc_actuator.model import Actuator  # noqa: E402
@@ -33,11 +33,7 @@ def step_size():
     for rate, bw in ((10000.0, 1000.0), (20000.0, 2000.0)):
         p = rich_params(**{"drive.current_loop_rate": rate, "drive.current_loop_bandwidth": bw,
                            "load.gravity_torque": 0.3})
-        prof = profiles.sine(3.0, 1.5, duration=1.0, rate=1000.0, offset=0.5)
-        ref = trajectories(p, prof, 1e-5)
-        for dt in (1e-3, 1e-4):
-            got = trajectories(p, prof, dt)
-            errs = {k: np.max(np.abs(got[k] - ref[k])) / (np.ptp(ref[k]) or 1.0) for k in ref}
+        for dt, errs in step_size_errors(p).items():
             text = ", ".join(f"{k} {v * 100:.3f} %" for k, v in errs.items())
             print(f"step size {dt * 1e6:.0f} us vs 10 us (loop {rate / 1e3:.0f} kHz): max error / range: {text}")
 

@@ -142,19 +142,25 @@ def trajectories(p, prof, dt):
     return {k: np.array(v) for k, v in out.items()}
 
 
+def step_size_errors(p, dts=(1e-3, 1e-4), ref_dt=1e-5):
+    """Max |difference| / range of each trajectory, stepping by each dt vs ref_dt (sine current command)."""
+    prof = profiles.sine(3.0, 1.5, duration=1.0, rate=1000.0, offset=0.5)
+    ref = trajectories(p, prof, ref_dt)
+    out = {}
+    for dt in dts:
+        got = trajectories(p, prof, dt)
+        out[dt] = {k: float(np.max(np.abs(got[k] - ref[k])) / (np.ptp(ref[k]) or 1.0)) for k in ref}
+    return out
+
+
 @pytest.mark.parametrize("loop_rate,bandwidth", [(10000.0, 1000.0), (20000.0, 2000.0)])
 def test_step_size_agreement_with_friction(loop_rate, bandwidth):
     """1 ms, 100 µs and 10 µs steps give the same trajectories within 0.5 % (of each signal's range),
     with friction (stick-slip reversals), cogging, gravity, R(T) and voltage saturation on."""
     p = rich_params(**{"drive.current_loop_rate": loop_rate, "drive.current_loop_bandwidth": bandwidth,
                        "load.gravity_torque": 0.3})
-    prof = profiles.sine(3.0, 1.5, duration=1.0, rate=1000.0, offset=0.5)
-    ref = trajectories(p, prof, 1e-5)
-    for dt in (1e-3, 1e-4):
-        got = trajectories(p, prof, dt)
-        for key in ref:
-            scale = np.ptp(ref[key]) or 1.0
-            err = np.max(np.abs(got[key] - ref[key])) / scale
+    for dt, errs in step_size_errors(p).items():
+        for key, err in errs.items():
             assert err < 5e-3, (dt, key, err)
 
 
