@@ -273,8 +273,7 @@ class _S:
 def _current_limit(c: _Coeffs, s: _S, ops):
     """Thermal protection: limit falls linearly from derate to trip temperature; trip latches."""
     s.tripped = ops.either(s.tripped, s.T_w >= c.T_trip)
-    scale = ops.clip((c.T_trip - s.T_w) / (c.T_trip - c.T_derate), 0.0, 1.0)
-    return ops.where(s.tripped, 0.0, c.I_lim * scale)
+    return _current_limit_readonly(c, s, ops)
 
 
 def _control_tick(c: _Coeffs, s: _S, ops) -> None:
@@ -598,6 +597,7 @@ def _outputs(c: _Coeffs, s: _S, winding, ops) -> dict[str, Any]:
 
 
 def _current_limit_readonly(c, s, ops):
+    """Effective current limit for the present winding temperature and trip state (no state change)."""
     scale = ops.clip((c.T_trip - s.T_w) / (c.T_trip - c.T_derate), 0.0, 1.0)
     return ops.where(s.tripped, 0.0, c.I_lim * scale)
 
