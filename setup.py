@@ -25,6 +25,8 @@ SIM = [
     "mcap>=1.2",
     "mcap-ros2-support>=0.5",
     "matplotlib>=3.6",
+    # compiles the physics kernel (bldc_actuator/kernel.py); without it the same source runs as plain Python
+    "numba>=0.60",
 ]
 # rclpy and the message packages as PyPI wheels (ROS 2 Kilted builds); for a venv without a ROS install.
 ROS_WHEELS = [

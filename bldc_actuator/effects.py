@@ -8,15 +8,7 @@ the same columns by least squares.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
-
-
-def _is_array(x, *_ignored) -> bool:
-    """Array path or float path, decided by the FIRST argument (the state variable): a batch passes
-    arrays of state; a single actuator passes floats (math is ~10x faster than numpy on scalars)."""
-    return isinstance(x, np.ndarray)
 
 
 # -- friction -------------------------------------------------------------------------------------
@@ -25,13 +17,10 @@ def friction_magnitude(direction, speed, coulomb, asymmetry, stribeck, stribeck_
     """Kinetic friction magnitude ``F(ω) = max(0, τ_c + d·τ_asym + τ_s·exp(-(ω/ω_s)²))`` [N·m].
 
     ``direction`` d = sign(ω) (±1; at rest the direction the rotor is pushed), ``speed`` = |ω| [rad/s].
-    At ``speed = 0`` this is the breakaway (static) friction.
+    At ``speed = 0`` this is the breakaway (static) friction. Floats, arrays, and compiled kernel code.
     """
-    if _is_array(direction, speed, coulomb, asymmetry, stribeck, stribeck_velocity):
-        value = coulomb + direction * asymmetry + stribeck * np.exp(-(speed / stribeck_velocity) ** 2)
-        return np.maximum(value, 0.0)
-    value = coulomb + direction * asymmetry + stribeck * math.exp(-(speed / stribeck_velocity) ** 2)
-    return value if value > 0.0 else 0.0
+    value = coulomb + direction * asymmetry + stribeck * np.exp(-(speed / stribeck_velocity) ** 2)
+    return np.maximum(value, 0.0)
 
 
 def friction_basis(omega, stribeck_velocity, smoothing_velocity=0.0):
@@ -61,18 +50,10 @@ def cogging_torque(theta, order, cos_coeffs, sin_coeffs):
     ``cos_coeffs``/``sin_coeffs`` are sequences (harmonic k = 1..n); for a batch, each entry may be an
     array over actuators. ``order`` = N_c (0 disables).
     """
-    if not len(cos_coeffs):
-        return 0.0 * theta
-    if _is_array(theta, order, *cos_coeffs, *sin_coeffs):
-        base = np.asarray(order) * theta
-        total = 0.0
-        for k, (a, b) in enumerate(zip(cos_coeffs, sin_coeffs), start=1):
-            total = total + a * np.cos(k * base) + b * np.sin(k * base)
-        return total
-    base = order * theta
-    total = 0.0
+    base = np.asarray(order) * theta
+    total = 0.0 * base
     for k, (a, b) in enumerate(zip(cos_coeffs, sin_coeffs), start=1):
-        total += a * math.cos(k * base) + b * math.sin(k * base)
+        total = total + a * np.cos(k * base) + b * np.sin(k * base)
     return total
 
 
@@ -80,22 +61,17 @@ def cogging_torque_mean(theta_start, dtheta, order, cos_coeffs, sin_coeffs):
     """Mean of :func:`cogging_torque` while θ sweeps uniformly from ``theta_start`` by ``dtheta`` [N·m].
 
     Each harmonic averages to its value at the mid angle times ``sinc(k N_c Δθ / 2)``; this keeps a
-    simulation step accurate when it spans a good part of a cogging period (fast rotation).
+    simulation step accurate when it spans a good part of a cogging period (fast rotation). Scalar angles
+    (the simulator's kernel, compiled); ``cos_coeffs``/``sin_coeffs`` are sequences over k = 1..n.
     """
-    if not len(cos_coeffs):
-        return 0.0 * theta_start
-    array = _is_array(theta_start, dtheta, order, *cos_coeffs, *sin_coeffs)
-    cos, sin = (np.cos, np.sin) if array else (math.cos, math.sin)
     base = order * (theta_start + 0.5 * dtheta)
     half = 0.5 * order * dtheta
-    total = 0.0
-    for k, (a, b) in enumerate(zip(cos_coeffs, sin_coeffs), start=1):
+    total = 0.0 * theta_start
+    for j in range(len(cos_coeffs)):
+        k = j + 1.0
         x = k * half
-        if array:
-            sinc = np.sinc(x / np.pi)
-        else:
-            sinc = math.sin(x) / x if abs(x) > 1e-8 else 1.0 - x * x / 6.0
-        total = total + sinc * (a * cos(k * base) + b * sin(k * base))
+        sinc = np.sin(x) / x if abs(x) > 1e-8 else 1.0 - x * x / 6.0
+        total = total + sinc * (cos_coeffs[j] * np.cos(k * base) + sin_coeffs[j] * np.sin(k * base))
     return total
 
 
@@ -111,8 +87,7 @@ def angle_harmonic_basis(theta, order, n_harmonics=1):
 
 def position_load_torque_out(theta_out, constant, gravity, gravity_phase, stiffness, spring_zero):
     """External load at the output ``τ_0 + τ_g sin(θ_out + φ_g) + k (θ_out - θ_k)`` [N·m]."""
-    sin = np.sin if _is_array(theta_out, gravity_phase) else math.sin
-    return constant + gravity * sin(theta_out + gravity_phase) + stiffness * (theta_out - spring_zero)
+    return constant + gravity * np.sin(theta_out + gravity_phase) + stiffness * (theta_out - spring_zero)
 
 
 # -- temperature dependence -----------------------------------------------------------------------
@@ -129,3 +104,12 @@ def flux_factor(temperature, reference_temperature, beta, enabled=True):
     if not enabled:
         return 1.0 + 0.0 * temperature
     return 1.0 + beta * (temperature - reference_temperature)
+
+
+# -- drive protection -------------------------------------------------------------------------------
+
+def derate_scale(winding_temperature, derate_temperature, trip_temperature):
+    """Thermal derating of the current limit [0..1]: 1 up to ``derate_temperature``, falling linearly to 0
+    at ``trip_temperature`` [°C] (where the drive trips and latches)."""
+    x = (trip_temperature - winding_temperature) / (trip_temperature - derate_temperature)
+    return np.minimum(np.maximum(x, 0.0), 1.0)

@@ -25,8 +25,10 @@ Integration over each interval ``h`` between controller ticks (or shorter, when 
 
 So the energy ledger closes to round-off, and trajectories agree across step sizes.
 
-One kernel (:func:`_advance`, :func:`_control_tick`) serves both :class:`Actuator` (Python floats, fast)
-and :class:`BatchActuator` (numpy arrays over many actuators or parameter sets).
+One kernel (:mod:`bldc_actuator.kernel`: :func:`~bldc_actuator.kernel.advance`,
+:func:`~bldc_actuator.kernel.control_tick`, ...) serves both :class:`Actuator` and :class:`BatchActuator`
+(many actuators or parameter sets). It is written once, per actuator, and compiled with numba when numba is
+installed (:data:`COMPILED`); without numba the same source runs as plain Python, with identical results.
 """
 
 from __future__ import annotations
@@ -34,11 +36,13 @@ from __future__ import annotations
 import cmath
 import math
 from dataclasses import dataclass, fields
+from types import SimpleNamespace
 from typing import Any, Sequence
 
 import numpy as np
 
-from . import effects, frames
+from . import effects, frames, kernel
+from .kernel import COMPILED, COEF_DTYPE, STATE_DTYPE, warm_up  # noqa: F401  (public)
 from .params import ActuatorParams
 
 TWO_PI = 2.0 * math.pi
@@ -159,18 +163,24 @@ class _Coeffs:
         self.load_k = ld("spring_stiffness")
         self.load_k0 = ld("spring_zero")
         self.has_position_load = bool(np.any(self.load_g) or np.any(self.load_k))
-        self._thermal_cache: dict[int, tuple] = {}
+        self.n_cog = len(self.cog_cos)
+        if self.n_cog > kernel.MAX_COGGING_HARMONICS:
+            raise ValueError(f"effects.cogging_cos: at most {kernel.MAX_COGGING_HARMONICS} harmonics, "
+                             f"got {self.n_cog}")
 
-    def thermal(self, h_ns: int):
-        """Exact discretisation of the thermal network for an interval of ``h_ns`` (cached)."""
-        hit = self._thermal_cache.get(h_ns)
-        if hit is None:
-            hit = _thermal_matrices(self.R_wh, self.R_ha, self.C_w, self.C_h, h_ns * 1e-9,
-                                    _ArrayOps if self.batch else _ScalarOps)
-            if len(self._thermal_cache) > 64:
-                self._thermal_cache.clear()
-            self._thermal_cache[h_ns] = hit
-        return hit
+    def pack(self, n: int) -> np.ndarray:
+        """The kernel's coefficient records (:data:`kernel.COEF_DTYPE`), one per actuator."""
+        cs = np.zeros(n, COEF_DTYPE)
+        for name in kernel._COEF_SCALARS:  # noqa: SLF001 - the layout belongs to the kernel
+            cs[name] = np.broadcast_to(np.asarray(getattr(self, name), dtype=float), (n,))
+        cs["tick_ns"] = self.tick_ns
+        cs["n_cog"] = self.n_cog
+        for k in range(self.n_cog):
+            cs["cog_cos"][:, k] = self.cog_cos[k]
+            cs["cog_sin"][:, k] = self.cog_sin[k]
+        th = kernel.thermal_matrices(cs["R_wh"], cs["R_ha"], cs["C_w"], cs["C_h"], self.tick_ns * 1e-9)
+        cs["th_tick"] = np.column_stack(th)
+        return cs
 
 
 def thermal_step_matrices(thermal, h: float):
@@ -179,34 +189,16 @@ def thermal_step_matrices(thermal, h: float):
     ``y_w' = p11 y_w + p12 y_h + G1 P``, ``y_h' = p21 y_w + p22 y_h + G2 P``. Returns
     ``(p11, p12, p21, p22, G1, G2)``: the same matrices the simulator uses (floats or, for array
     parameters, arrays)."""
-    ops = _ArrayOps if isinstance(thermal.winding_heat_capacity, np.ndarray) else _ScalarOps
     return _thermal_matrices(thermal.winding_to_housing_resistance, thermal.housing_to_ambient_resistance,
-                             thermal.winding_heat_capacity, thermal.housing_heat_capacity, h, ops)[:6]
+                             thermal.winding_heat_capacity, thermal.housing_heat_capacity, h)[:6]
 
 
-def _thermal_matrices(R_wh, R_ha, C_w, C_h, h, ops):
-    """``y(h) = Φ y(0) + Γ P`` for ``dy/dt = A y + g P`` (y = temperatures above ambient), and
-    ``∫y dt = A⁻¹ (y(h) - y(0) - g P h)``. Closed-form 2×2 exponential (Sylvester): the passive RC
-    network has real, distinct, negative eigenvalues."""
-    a11, a12 = -1.0 / (R_wh * C_w), 1.0 / (R_wh * C_w)
-    a21, a22 = 1.0 / (R_wh * C_h), -(1.0 / R_wh + 1.0 / R_ha) / C_h
-    tr, det = a11 + a22, a11 * a22 - a12 * a21
-    disc = ops.sqrt(tr * tr / 4.0 - det)
-    l1, l2 = tr / 2.0 + disc, tr / 2.0 - disc
-    e1, e2 = ops.exp(l1 * h), ops.exp(l2 * h)
-    dl = l1 - l2
-    # Φ = (e1 (A - l2 I) - e2 (A - l1 I)) / (l1 - l2)
-    p11 = (e1 * (a11 - l2) - e2 * (a11 - l1)) / dl
-    p12 = (e1 - e2) * a12 / dl
-    p21 = (e1 - e2) * a21 / dl
-    p22 = (e1 * (a22 - l2) - e2 * (a22 - l1)) / dl
-    # A^-1
-    i11, i12, i21, i22 = a22 / det, -a12 / det, -a21 / det, a11 / det
-    g1 = 1.0 / C_w
-    # Γ = A^-1 (Φ - I) g
-    q1, q2 = (p11 - 1.0) * g1, p21 * g1
-    G1, G2 = i11 * q1 + i12 * q2, i21 * q1 + i22 * q2
-    return p11, p12, p21, p22, G1, G2, i21, i22, g1
+def _thermal_matrices(R_wh, R_ha, C_w, C_h, h, ops=None):
+    """:func:`bldc_actuator.kernel.thermal_matrices` (``ops`` is accepted for older callers and ignored)."""
+    out = kernel.thermal_matrices(R_wh, R_ha, C_w, C_h, h)
+    if not isinstance(R_wh, np.ndarray) and not isinstance(h, np.ndarray):
+        out = tuple(float(x) for x in out)
+    return out
 
 
 # -- state ---------------------------------------------------------------------------------------------
@@ -261,174 +253,6 @@ class EnergyLedger:
         return self.joule - self.thermal - self.heat_to_ambient
 
 
-class _S:
-    """Mutable kernel state (floats for one actuator, arrays for a batch)."""
-
-    __slots__ = ("t_ns", "i", "omega", "theta", "T_w", "T_h", "v", "z", "i_ref", "tripped", "cmd_q", "v_cmd",
-                 "tau_ext_out", "acc", "e_disc", "e_in", "e_joule", "e_visc", "e_fric", "e_load", "e_amb", "h_left")
-
-
-# -- the kernel ----------------------------------------------------------------------------------------
-
-def _current_limit(c: _Coeffs, s: _S, ops):
-    """Thermal protection: limit falls linearly from derate to trip temperature; trip latches."""
-    s.tripped = ops.either(s.tripped, s.T_w >= c.T_trip)
-    return _current_limit_readonly(c, s, ops)
-
-
-def _control_tick(c: _Coeffs, s: _S, ops) -> None:
-    """One execution of the discrete d/q PI current controller; sets the voltage held until the next.
-    In voltage mode (``s.v_cmd`` not None) the PI is bypassed and the commanded voltage is applied."""
-    if s.v_cmd is not None:
-        mag = abs(s.v_cmd)
-        s.v = s.v_cmd * ops.where(mag > c.V_max, c.V_max / ops.where(mag > 0.0, mag, 1.0), 1.0)
-        s.i_ref = 0.0 * s.omega
-        return
-    lim = _current_limit(c, s, ops)
-    s.i_ref = ops.clip(s.cmd_q, -lim, lim)
-    err = 1j * s.i_ref - s.i                                   # i_d_ref = 0
-    v_ff = ops.where(c.decouple, 1j * (c.pole_pairs * s.omega * c.L * s.i + c.K_ref * s.omega), 0.0)
-    v_pi = c.Kp * err + s.z + v_ff
-    mag = abs(v_pi)
-    scale = ops.where(mag > c.V_max, c.V_max / ops.where(mag > 0.0, mag, 1.0), 1.0)
-    s.v = v_pi * scale
-    s.z = s.z + c.Ki * c.T_c * err + (s.v - v_pi)              # back-calculation anti-windup
-
-
-def _advance(c: _Coeffs, s: _S, h_ns: int, ops) -> None:
-    """Advance the plant by ``h_ns`` with the held voltage ``s.v``."""
-    h = h_ns * 1e-9
-    i0, w0, th0, v = s.i, s.omega, s.theta, s.v
-    R = effects.resistance_at(c.R_ref, s.T_w, c.T_ref, c.alpha) if c.has_alpha else c.R_ref
-    K = c.K_ref * effects.flux_factor(s.T_h, c.T_ref, c.beta) if c.has_beta else c.K_ref  # magnet at T_housing
-    L, J = c.L, c.J
-    # electrical: L di/dt = v - (R + j p w0 L) i - j K ω(t), with the speed ramping linearly over the
-    # interval, ω(t) = w0 + r t, r = 2 (w - w0)/h (w = mean speed, found below). Exact solution:
-    # i(t) = c0 + c1 t + (i0 - c0) e^{-a t}, c1 = -j K r/(L a), c0 = (v - j K w0)/(L a) - c1/a.
-    # cross-coupling (does no work) at the predicted mid-interval speed, extrapolating the last acceleration
-    Z = R + 1j * c.pole_pairs * (w0 + 0.5 * h * s.acc) * L
-    a = Z / L
-    ah = a * h
-    E = ops.cexp(-ah)
-    phi1 = (1.0 - E) / ah                        # (1/h) ∫ e^{-at} dt
-    # mean current ī = c0 (1 - phi1) + c1 h/2 + i0 phi1, affine in w: split c0, c1 into parts
-    c1_w = -2j * K / (h * Z)                     # c1 = c1_w (w - w0)
-    c0_v = (v - 1j * K * w0) / Z
-    c0_w = -c1_w / a                             # c0 = c0_v + c0_w (w - w0)
-    m_w = c0_w * (1.0 - phi1) + c1_w * (0.5 * h)
-    A = (c0_v * (1.0 - phi1) + i0 * phi1 - m_w * w0).imag   # mean i_q = A + B w
-    B = m_w.imag
-    # external torques at the motor side, at the predicted mid-interval angle
-    if c.has_position_load:
-        th_mid = th0 + 0.5 * h * w0
-        tau_other = effects.position_load_torque_out(th_mid / c.N, c.load0 + s.tau_ext_out, c.load_g,
-                                                     c.load_phi, c.load_k, c.load_k0) / c.N
-    else:
-        tau_other = (c.load0 + s.tau_ext_out) / c.N
-    if c.cog_cos:
-        tau_other = tau_other + effects.cogging_torque_mean(th0, h * w0, c.cog_order, c.cog_cos, c.cog_sin)
-    # mechanical, implicit midpoint: J (w1 - w0)/h = K (A + B w) - b w - tau_other - tau_f, w = (w0 + w1)/2
-    den = 2.0 * J / h + c.b - K * B
-    num = 2.0 * J * w0 / h + K * A - tau_other
-    if c.has_friction:
-        w, tau_f = _friction(c, num, den, w0, h, ops)
-    else:
-        w = num / den
-        tau_f = 0.0
-    w1 = 2.0 * w - w0
-    # electrical solution with that w
-    c1 = c1_w * (w - w0)
-    c0 = c0_v + c0_w * (w - w0)
-    d = i0 - c0
-    i1 = c0 + c1 * h + d * E
-    i_mean = c0 * (1.0 - phi1) + c1 * (0.5 * h) + i0 * phi1
-    # exact ∫|i|² dt and ∫ t i dt
-    sigma2h = 2.0 * (R / L) * h
-    phi2 = (1.0 - ops.exp(-sigma2h)) / sigma2h
-    psi1 = (1.0 - E * (1.0 + ah)) / (ah * ah)   # (1/h²) ∫ t e^{-at} dt
-    joule = R * h * (abs(c0) ** 2 + (c0.conjugate() * c1).real * h + abs(c1) ** 2 * h * h / 3.0
-                     + 2.0 * (d * (c0.conjugate() * phi1 + c1.conjugate() * h * psi1)).real
-                     + abs(d) ** 2 * phi2)
-    int_t_iq = (c0 * (0.5 * h * h) + c1 * (h ** 3 / 3.0) + d * (h * h) * psi1).imag
-    conv_el = K * (w0 * i_mean.imag * h + (2.0 * (w - w0) / h) * int_t_iq)   # ∫ K ω(t) i_q dt
-    conv_mech = K * i_mean.imag * w * h                                        # work of the mean torque
-    dth = w * h
-    # thermal: exact for the interval-mean Joule power
-    p11, p12, p21, p22, G1, G2, i21, i22, g1 = c._thermal_cache.get(h_ns) or c.thermal(h_ns)
-    P = joule / h
-    y1, y2 = s.T_w - c.T_amb, s.T_h - c.T_amb
-    n1 = p11 * y1 + p12 * y2 + G1 * P
-    n2 = p21 * y1 + p22 * y2 + G2 * P
-    int_y2 = i21 * (n1 - y1 - g1 * P * h) + i22 * (n2 - y2)
-    # ledger
-    s.e_in = s.e_in + (v.conjugate() * i_mean).real * h
-    s.e_joule = s.e_joule + joule
-    s.e_visc = s.e_visc + c.b * w * w * h
-    s.e_fric = s.e_fric + tau_f * dth
-    s.e_load = s.e_load + tau_other * dth
-    s.e_amb = s.e_amb + int_y2 / c.R_ha
-    s.e_disc = s.e_disc + (conv_el - conv_mech)
-    # commit
-    s.acc = (w1 - w0) / h
-    s.i, s.omega, s.theta = i1, w1, th0 + dth
-    s.T_w, s.T_h = n1 + c.T_amb, n2 + c.T_amb
-    s.t_ns = s.t_ns + h_ns
-
-
-def _friction(c: _Coeffs, num, den, w0, h, ops):
-    """Mean speed ``w`` and friction torque ``τ_f`` (constant over the interval) from the mechanical
-    balance ``den·w = num - τ_f`` (implicit midpoint, see :func:`_advance`), without a bristle state.
-
-    * moving: kinetic friction at the predicted mid-interval speed (one corrector pass, so a fast pass
-      through the Stribeck region is not evaluated at a stale speed);
-    * the speed would cross zero: up to the crossing time ``t*`` friction opposes the old direction; after
-      it the rotor either sticks (ends the interval at exactly 0, friction balancing the drive) or, when
-      the drive exceeds breakaway, slips the other way — friction is then the time-weighted mean of the
-      two phases, which keeps the result second-order accurate across step sizes;
-    * at rest: stays stuck while the drive torque is within static friction, else breaks away.
-    """
-    mag = lambda d, speed: effects.friction_magnitude(d, speed, c.tau_c, c.tau_asym, c.tau_s, c.omega_s)  # noqa: E731
-    J2h = 2.0 * c.J / h                       # den = J2h + (b - K B); num = J2h w0 + drive(0)
-    d0 = ops.sign(w0)
-    F_mov = mag(d0, abs(w0))
-    if c.has_stribeck:
-        w_pred = (num - d0 * F_mov) / den
-        F_mov = mag(d0, abs(ops.where(w_pred * w0 > 0.0, w_pred, 0.5 * w0)))
-    w_mov = (num - d0 * F_mov) / den
-    crossed = ops.both(w0 * (2.0 * w_mov - w0) < 0.0, F_mov > 0.0)
-    moving = w0 != 0.0
-    if ops.all_true(moving) and not ops.any_true(crossed):   # the common case: sliding on
-        return w_mov, d0 * F_mov
-    # drive torque (everything but friction and inertia) at the crossing, w ~ 0: num - J2h w0 - (den - J2h)*0
-    drive = num - J2h * w0
-    push = ops.sign(drive)
-    F_st = mag(push, 0.0 * w0)
-    breaks = abs(drive) > F_st
-    # crossing time: w0 + (drive - d0 F_mov) t*/J = 0
-    t_star = ops.clip(-c.J * w0 / ops.where(crossed, drive - d0 * F_mov, -1.0), 0.0, h)
-    f_cross = (t_star * d0 * F_mov + (h - t_star) * push * F_st) / h
-    w_rev = (num - f_cross) / den
-    reverses = ops.both(crossed, ops.both(breaks, push == -d0))
-    w = ops.where(moving,
-                  ops.where(reverses, w_rev, ops.where(crossed, 0.5 * w0, w_mov)),
-                  ops.where(breaks, (num - push * F_st) / den, 0.0 * w0))
-    tau_f = ops.where(moving,
-                      ops.where(reverses, f_cross, ops.where(crossed, num - den * 0.5 * w0, d0 * F_mov)),
-                      ops.where(breaks, push * F_st, drive))
-    return w, tau_f
-
-
-def _step(c: _Coeffs, s: _S, dt_ns: int, ops) -> None:
-    """Advance ``dt_ns``: the controller ticks at multiples of its period; intervals split where asked."""
-    tick = c.tick_ns
-    end = s.t_ns + dt_ns
-    while s.t_ns < end:
-        phase = s.t_ns % tick
-        if phase == 0:
-            _control_tick(c, s, ops)
-        _advance(c, s, min(tick - phase, end - s.t_ns), ops)
-
-
 # -- public classes ------------------------------------------------------------------------------------
 
 def _seconds_to_ns(dt: float) -> int:
@@ -438,61 +262,99 @@ def _seconds_to_ns(dt: float) -> int:
 
 
 class _Base:
-    _ops: Any
+    """Holds the kernel's records: coefficients ``_cs`` and state ``_ss`` (structured arrays, one element per
+    actuator). Compiled: the kernel steps the arrays in place. Pure Python: it steps :class:`kernel.Record`
+    objects (``_rc``, ``_rs``), the working copies of the same fields."""
 
-    def _init_state(self, c: _Coeffs, T_w0, T_h0, zeros):
-        s = _S()
-        s.t_ns = 0
-        s.i = zeros + 0j
-        s.omega = zeros + 0.0
-        s.acc = zeros + 0.0
-        s.theta = zeros + 0.0
-        s.T_w, s.T_h = T_w0, T_h0
-        s.v = zeros + 0j
-        s.z = zeros + 0j
-        s.i_ref = zeros + 0.0
-        s.tripped = zeros != 0.0 if isinstance(zeros, np.ndarray) else False
-        s.cmd_q = zeros + 0.0
-        s.v_cmd = None
-        s.tau_ext_out = zeros + 0.0
-        s.e_in = s.e_joule = s.e_visc = s.e_fric = s.e_load = s.e_amb = s.e_disc = zeros + 0.0
-        return s
+    _batch: bool
+
+    def _init_kernel(self, plist, T_w0, T_h0) -> None:
+        self._c = _Coeffs(plist if self._batch else plist[0])
+        n = len(plist)
+        self._cs = self._c.pack(n)
+        self._ss = np.zeros(n, STATE_DTYPE)
+        self._ss["T_w"], self._ss["T_h"] = T_w0, T_h0
+        self._T0 = (T_w0, T_h0) if self._batch else (float(T_w0), float(T_h0))
+        self._rc = self._rs = None
+        if not COMPILED:
+            self._rc, self._rs = kernel.to_records(self._cs), kernel.to_records(self._ss)
+
+    def _new_coeffs(self, plist) -> None:
+        self._c = _Coeffs(plist if self._batch else plist[0])
+        self._cs = self._c.pack(len(plist))
+        if not COMPILED:
+            self._rc = kernel.to_records(self._cs)
+
+    # field access (arrays for a batch, Python scalars for one actuator)
+    def _get(self, name: str):
+        if self._rs is None:
+            col = self._ss[name]
+            return col.copy() if self._batch else col[0].item()
+        if self._batch:
+            return np.array([getattr(r, name) for r in self._rs])
+        return getattr(self._rs[0], name)
+
+    def _set(self, name: str, value) -> None:
+        if self._rs is None:
+            self._ss[name] = value
+            return
+        for r, v in zip(self._rs, np.broadcast_to(np.asarray(value), (len(self._rs),))):
+            setattr(r, name, kernel._python_value(v))  # noqa: SLF001
+
+    def _view(self) -> SimpleNamespace:
+        """The state as attributes (arrays for a batch, scalars for one actuator)."""
+        return SimpleNamespace(**{name: self._get(name) for name in STATE_DTYPE.names})
 
     def step(self, dt: float) -> None:
         """Advance the simulation by ``dt`` seconds (any size; rounded to whole ns)."""
-        _step(self._c, self._s, _seconds_to_ns(dt), self._ops)
+        self.step_ns(_seconds_to_ns(dt))
 
     def step_ns(self, dt_ns: int) -> None:
-        _step(self._c, self._s, int(dt_ns), self._ops)
+        dt_ns = int(dt_ns)
+        if self._rs is None:
+            kernel.step_all(self._cs, self._ss, dt_ns)
+        else:
+            for c, s in zip(self._rc, self._rs):
+                kernel.step(c, s, dt_ns)
 
     def _ledger_values(self):
-        c, s = self._c, self._s
-        return dict(electrical_in=s.e_in, joule=s.e_joule, magnetic=0.5 * c.L * abs(s.i) ** 2,
-                    kinetic=0.5 * c.J * s.omega ** 2, viscous=s.e_visc, friction=s.e_fric, load=s.e_load,
-                    heat_to_ambient=s.e_amb, discretization=s.e_disc,
-                    thermal=c.C_w * (s.T_w - self._T0[0]) + c.C_h * (s.T_h - self._T0[1]))
+        c, g = self._c, self._get
+        return dict(electrical_in=g("e_in"), joule=g("e_joule"), magnetic=0.5 * c.L * abs(g("i")) ** 2,
+                    kinetic=0.5 * c.J * g("omega") ** 2, viscous=g("e_visc"), friction=g("e_fric"),
+                    load=g("e_load"), heat_to_ambient=g("e_amb"), discretization=g("e_disc"),
+                    thermal=c.C_w * (g("T_w") - self._T0[0]) + c.C_h * (g("T_h") - self._T0[1]))
 
     def _torque_to_current(self, tau_out):
         c = self._c
         return tau_out / (c.K_ref * c.N)
 
+    @property
+    def t(self) -> float:
+        return self.t_ns * 1e-9
+
+    @property
+    def t_ns(self) -> int:
+        return int(self._ss["t_ns"][0]) if self._rs is None else int(self._rs[0].t_ns)
+
+    @property
+    def energy(self) -> EnergyLedger:
+        return EnergyLedger(**self._ledger_values())
+
 
 class Actuator(_Base):
-    """One actuator, stepped with Python floats (fast path). Deterministic; no wall clock, no globals.
+    """One actuator. Deterministic; no wall clock, no globals.
 
     >>> act = Actuator(ActuatorParams())
     >>> act.set_current_command(2.0)
     >>> act.step(0.01)
     """
 
-    _ops = _ScalarOps
+    _batch = False
 
     def __init__(self, params: ActuatorParams | None = None, state: ActuatorState | None = None):
         self.params = params if params is not None else ActuatorParams()
-        self._c = _Coeffs(self.params)
         th = self.params.thermal
-        self._T0 = (th.initial_winding_temperature, th.initial_housing_temperature)
-        self._s = self._init_state(self._c, *self._T0, 0.0)
+        self._init_kernel([self.params], th.initial_winding_temperature, th.initial_housing_temperature)
         if state is not None:
             self.set_state(state)
 
@@ -501,67 +363,65 @@ class Actuator(_Base):
         """q-axis current command [A] (limited by ``drive.current_limit`` and thermal derating)."""
         if not math.isfinite(i_q_ref):
             raise ValueError(f"current command: expected a finite q-axis current [A], got {i_q_ref!r}")
-        self._s.cmd_q = float(i_q_ref)
-        self._s.v_cmd = None
+        self._set("cmd_q", float(i_q_ref))
+        self._set("v_mode", False)
 
     def set_voltage_command(self, v_d: float, v_q: float) -> None:
         """Open-loop voltage mode [V, d-q power-invariant]: the current controller is bypassed (the
         inverter still limits |v| to the SVPWM circle). A current or torque command ends it."""
         if not (math.isfinite(v_d) and math.isfinite(v_q)):
             raise ValueError(f"voltage command: expected finite d/q voltages [V], got {v_d!r}, {v_q!r}")
-        self._s.v_cmd = complex(v_d, v_q)
+        self._set("v_cmd", complex(v_d, v_q))
+        self._set("v_mode", True)
 
     def set_torque_command(self, tau_out: float) -> None:
         """Output-side torque command [N·m] → ``i_q_ref = τ / (K_t_q N)`` with the nominal K_t_q."""
         if not math.isfinite(tau_out):
             raise ValueError(f"torque command: expected a finite output torque [N*m], got {tau_out!r}")
-        self._s.cmd_q = self._torque_to_current(float(tau_out))
-        self._s.v_cmd = None
+        self._set("cmd_q", self._torque_to_current(float(tau_out)))
+        self._set("v_mode", False)
 
     def set_load_torque(self, tau_out: float) -> None:
         """Extra external load torque at the output [N·m], added to ``load.load_torque``."""
         if not math.isfinite(tau_out):
             raise ValueError(f"load torque: expected a finite output torque [N*m], got {tau_out!r}")
-        self._s.tau_ext_out = float(tau_out)
+        self._set("tau_ext_out", float(tau_out))
 
     def update_params(self, params: ActuatorParams) -> None:
         """Replace the parameters; the state carries on (bus voltage, limits, load, ambient...)."""
         self.params = params
-        self._c = _Coeffs(params)
+        self._new_coeffs([params])
 
     def reset_fault(self) -> None:
         """Clear a latched over-temperature trip (it trips again at once if still too hot)."""
-        self._s.tripped = False
+        self._set("tripped", False)
 
     # state
     @property
-    def t(self) -> float:
-        return self._s.t_ns * 1e-9
-
-    @property
-    def t_ns(self) -> int:
-        return self._s.t_ns
-
-    @property
     def state(self) -> ActuatorState:
-        s = self._s
-        return ActuatorState(t_ns=s.t_ns, i_d=s.i.real, i_q=s.i.imag, omega=s.omega, theta=s.theta,
-                             T_winding=s.T_w, T_housing=s.T_h, v_d=s.v.real, v_q=s.v.imag, z_d=s.z.real,
-                             z_q=s.z.imag, i_q_ref=s.i_ref, tripped=bool(s.tripped))
+        g = self._get
+        i, v, z = complex(g("i")), complex(g("v")), complex(g("z"))
+        return ActuatorState(t_ns=int(g("t_ns")), i_d=i.real, i_q=i.imag, omega=float(g("omega")),
+                             theta=float(g("theta")), T_winding=float(g("T_w")), T_housing=float(g("T_h")),
+                             v_d=v.real, v_q=v.imag, z_d=z.real, z_q=z.imag, i_q_ref=float(g("i_ref")),
+                             tripped=bool(g("tripped")))
 
     def set_state(self, st: ActuatorState) -> None:
-        s = self._s
-        s.t_ns, s.i, s.omega, s.theta = int(st.t_ns), complex(st.i_d, st.i_q), float(st.omega), float(st.theta)
-        s.T_w, s.T_h, s.v, s.z = float(st.T_winding), float(st.T_housing), complex(st.v_d, st.v_q), complex(st.z_d, st.z_q)
-        s.i_ref, s.tripped = float(st.i_q_ref), bool(st.tripped)
-
-    @property
-    def energy(self) -> EnergyLedger:
-        return EnergyLedger(**self._ledger_values())
+        s = self._set
+        s("t_ns", int(st.t_ns))
+        s("i", complex(st.i_d, st.i_q))
+        s("omega", float(st.omega))
+        s("theta", float(st.theta))
+        s("T_w", float(st.T_winding))
+        s("T_h", float(st.T_housing))
+        s("v", complex(st.v_d, st.v_q))
+        s("z", complex(st.z_d, st.z_q))
+        s("i_ref", float(st.i_q_ref))
+        s("tripped", bool(st.tripped))
 
     def outputs(self) -> dict[str, float]:
         """Everything a driver or the node publishes, derived from the state."""
-        return _outputs(self._c, self._s, self.params.motor.winding, self._ops)
+        return _outputs(self._c, self._view(), self.params.motor.winding, _ScalarOps)
 
     def run(self, profile, *, record_every: float | None = None) -> "SimResult":
         """Run a command profile (see :mod:`bldc_actuator.profiles`) and return every signal."""
@@ -570,7 +430,7 @@ class Actuator(_Base):
         return run_profile(self, profile, record_every=record_every)
 
 
-def _outputs(c: _Coeffs, s: _S, winding, ops) -> dict[str, Any]:
+def _outputs(c: _Coeffs, s, winding, ops) -> dict[str, Any]:
     i_d, i_q = s.i.real, s.i.imag
     v_d, v_q = s.v.real, s.v.imag
     K = c.K_ref * effects.flux_factor(s.T_h, c.T_ref, c.beta)
@@ -591,35 +451,27 @@ def _outputs(c: _Coeffs, s: _S, winding, ops) -> dict[str, Any]:
         "T_winding": s.T_w, "T_housing": s.T_h,
         "resistance_phase": effects.resistance_at(c.R_ref, s.T_w, c.T_ref, c.alpha),
         "joule_power": effects.resistance_at(c.R_ref, s.T_w, c.T_ref, c.alpha) * abs(s.i) ** 2,
-        "current_limit_effective": _current_limit_readonly(c, s, ops),
+        "current_limit_effective": ops.where(s.tripped, 0.0,
+                                             c.I_lim * effects.derate_scale(s.T_w, c.T_derate, c.T_trip)),
         "tripped": s.tripped,
     }
 
 
-def _current_limit_readonly(c, s, ops):
-    """Effective current limit for the present winding temperature and trip state (no state change)."""
-    scale = ops.clip((c.T_trip - s.T_w) / (c.T_trip - c.T_derate), 0.0, 1.0)
-    return ops.where(s.tripped, 0.0, c.I_lim * scale)
-
-
 class BatchActuator(_Base):
-    """Many actuators (or one actuator under many parameter sets) stepped together with numpy.
+    """Many actuators (or one actuator under many parameter sets) stepped together (one compiled call).
 
     All share the controller rate; every other parameter may differ. Commands are arrays (or scalars).
     """
 
-    _ops = _ArrayOps
+    _batch = True
 
     def __init__(self, params: Sequence[ActuatorParams]):
         self.params = list(params)
         if not self.params:
             raise ValueError("BatchActuator needs at least one parameter set")
-        self._c = _Coeffs(self.params)
-        zeros = np.zeros(len(self.params))
         T_w0 = np.array([p.thermal.initial_winding_temperature for p in self.params])
         T_h0 = np.array([p.thermal.initial_housing_temperature for p in self.params])
-        self._T0 = (T_w0, T_h0)
-        self._s = self._init_state(self._c, T_w0.copy(), T_h0.copy(), zeros)
+        self._init_kernel(self.params, T_w0, T_h0)
         self._winding = np.array([p.motor.winding for p in self.params])
 
     def __len__(self) -> int:
@@ -631,32 +483,40 @@ class BatchActuator(_Base):
         simulation windows from measured states (multiple shooting). The command is set to ``i_q_ref``."""
         n = len(self)
         arr = lambda x: np.broadcast_to(np.asarray(x, dtype=float), (n,)).copy()  # noqa: E731
-        s = self._s
-        s.i = arr(i_d) + 1j * arr(i_q)
-        s.omega, s.theta = arr(omega), arr(theta)
-        s.T_w, s.T_h = arr(T_winding), arr(T_housing)
-        s.v = arr(v_d) + 1j * arr(v_q)
-        s.z = arr(z_d) + 1j * arr(z_q)
-        s.i_ref = arr(i_q_ref)
-        s.cmd_q = arr(i_q_ref)
-        s.acc = np.zeros(n)
-        s.v_cmd = None
+        s = self._set
+        s("i", arr(i_d) + 1j * arr(i_q))
+        s("omega", arr(omega))
+        s("theta", arr(theta))
+        s("T_w", arr(T_winding))
+        s("T_h", arr(T_housing))
+        s("v", arr(v_d) + 1j * arr(v_q))
+        s("z", arr(z_d) + 1j * arr(z_q))
+        s("i_ref", arr(i_q_ref))
+        s("cmd_q", arr(i_q_ref))
+        s("acc", np.zeros(n))
+        s("v_mode", False)
+
+    def field(self, name: str) -> np.ndarray:
+        """One raw kernel state field over the batch (a copy): ``i`` (complex ``i_d + j i_q`` [A]),
+        ``omega`` [rad/s], ``theta`` [rad], ``T_w``/``T_h`` [°C], ``v``/``z`` (complex [V]), ``i_ref`` [A], ...
+        (:data:`kernel.STATE_DTYPE`). Cheaper than :meth:`outputs` inside a stepping loop."""
+        if name not in STATE_DTYPE.names:
+            raise KeyError(f"field: expected one of {', '.join(STATE_DTYPE.names)}, got {name!r}")
+        return self._get(name)
 
     def set_current_command(self, i_q_ref) -> None:
-        self._s.cmd_q = np.broadcast_to(np.asarray(i_q_ref, dtype=float), (len(self),)).copy()
+        self._set("cmd_q", np.broadcast_to(np.asarray(i_q_ref, dtype=float), (len(self),)))
+        self._set("v_mode", False)
 
     def set_torque_command(self, tau_out) -> None:
-        self._s.cmd_q = np.broadcast_to(self._torque_to_current(np.asarray(tau_out, dtype=float)), (len(self),)).copy()
+        self._set("cmd_q", np.broadcast_to(self._torque_to_current(np.asarray(tau_out, dtype=float)), (len(self),)))
+        self._set("v_mode", False)
 
     def set_load_torque(self, tau_out) -> None:
-        self._s.tau_ext_out = np.broadcast_to(np.asarray(tau_out, dtype=float), (len(self),)).copy()
-
-    @property
-    def t(self) -> float:
-        return self._s.t_ns * 1e-9
+        self._set("tau_ext_out", np.broadcast_to(np.asarray(tau_out, dtype=float), (len(self),)))
 
     def outputs(self) -> dict[str, np.ndarray]:
-        out = _outputs(self._c, self._s, "wye", self._ops)
+        out = _outputs(self._c, self._view(), "wye", _ArrayOps)
         # line currents depend on each actuator's winding
         delta = self._winding == "delta"
         if np.any(delta):
@@ -665,9 +525,6 @@ class BatchActuator(_Base):
                 out[key] = np.where(delta, val, out[key])
         return out
 
-    @property
-    def energy(self) -> EnergyLedger:
-        return EnergyLedger(**self._ledger_values())
 
 
 @dataclass

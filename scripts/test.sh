@@ -7,8 +7,24 @@
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/env.sh"
 set +e
+# The physics kernel is compiled with numba; the same source also runs as plain Python
+# (BLDC_ACTUATOR_NO_NUMBA=1). A full run (no test paths, -k or -m given) first runs the physics test files on
+# that pure-Python path too, so every physics test runs on both paths.
+both=1
+for a in "$@"; do
+    case "$a" in -k|-m|*test*|*::*) both=0 ;; esac
+done
+rc=0
+if [[ $both == 1 && "${BLDC_TEST_PYTHON_KERNEL:-1}" != 0 ]]; then
+    echo "test.sh: physics tests on the pure-Python kernel path (BLDC_ACTUATOR_NO_NUMBA=1)"
+    BLDC_ACTUATOR_NO_NUMBA=1 "$VENV/bin/python" -m pytest -q -p no:cacheprovider \
+        test/test_model.py test/test_simulate.py test/test_presets.py
+    rc=$?
+    echo "test.sh: full suite (compiled kernel)"
+fi
 "$VENV/bin/python" -m pytest test "$@"
-rc=$?
+rc2=$?
+[[ $rc -eq 0 ]] && rc=$rc2
 set -e
 if [[ $rc -eq 5 ]]; then
     # pytest: "no tests were collected" (e.g. a -k filter that matches nothing, or an empty suite)

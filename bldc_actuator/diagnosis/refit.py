@@ -252,20 +252,6 @@ def windows(ctx: Context, length: float, max_windows: int, which: str) -> list[i
     return starts
 
 
-def _set_state(b: BatchActuator, **st) -> None:
-    """Initial state of every batch element (the batch has no public set_state yet)."""
-    s = b._s
-    s.i = st["i_d"] + 1j * st["i_q"]
-    s.omega = st["omega"].astype(float).copy()
-    s.theta = st["theta"].astype(float).copy()
-    s.T_w = st["T_w"].astype(float).copy()
-    s.T_h = st["T_h"].astype(float).copy()
-    s.v = st["v_d"] + 1j * st["v_q"]
-    s.z = st["z_d"] + 1j * st["z_q"]
-    s.i_ref = st["i_ref"].astype(float).copy()
-    s.cmd_q = st["i_ref"].astype(float).copy()
-
-
 def replay(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], length: float) -> list[dict[str, Any]]:
     """Simulate every window under every parameter set (one BatchActuator); per set: RMS error of current
     [A], speed [rad/s] and angle [rad] against the (low-passed) measurements, and the traces of the first
@@ -293,22 +279,21 @@ def replay(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], le
     pp = np.array([p.motor.pole_pairs for p in plist])
     i_q0, w0 = i_meas[st], w_meas[st]
     i_d0 = ctx.dec.lowpass(S["i_d"])[st]
-    _set_state(b, i_d=i_d0, i_q=i_q0, omega=w0, theta=S["theta"][st], T_w=S["T_w"][st], T_h=S["T_h"][st],
-               v_d=R * i_d0 - pp * w0 * Lq * i_q0, v_q=R * i_q0 + K * w0 + pp * w0 * Lq * i_d0,
-               z_d=R * i_d0, z_q=R * i_q0, i_ref=cmd[st])
+    b.set_state(i_d=i_d0, i_q=i_q0, omega=w0, theta=S["theta"][st], T_winding=S["T_w"][st],
+                T_housing=S["T_h"][st], v_d=R * i_d0 - pp * w0 * Lq * i_q0,
+                v_q=R * i_q0 + K * w0 + pp * w0 * Lq * i_d0, z_d=R * i_d0, z_q=R * i_q0, i_q_ref=cmd[st])
     dt = 1.0 / ctx.fs
     sim_i = np.zeros((L, len(plist)))
     sim_w = np.zeros((L, len(plist)))
     sim_th = np.zeros((L, len(plist)))
-    s = b._s
     for k in range(L):
         b.set_current_command(cmd[st + k])
         if load is not None:
             b.set_load_torque(load[st + k])
         b.step(dt)
-        sim_i[k] = s.i.imag
-        sim_w[k] = s.omega
-        sim_th[k] = s.theta
+        sim_i[k] = b.field("i").imag
+        sim_w[k] = b.field("omega")
+        sim_th[k] = b.field("theta")
     idx = st[None, :] + np.arange(1, L + 1)[:, None]
     meas_i, meas_w, meas_th = i_meas[idx], w_meas[idx], S["theta"][idx]
     out = []

@@ -1,0 +1,346 @@
+"""The actuator's equations, one scalar implementation, compiled with numba when it is installed.
+
+Every function here works on ONE actuator: ``c`` holds its coefficients and ``s`` its state, both read
+and written by attribute (``c.L``, ``s.omega``). The compiled path passes numpy records (one element of
+a structured array, see :data:`COEF_DTYPE`, :data:`STATE_DTYPE`); the pure-Python fallback passes plain
+objects with the same attribute names (:class:`Record`). The source is the same: numba compiles these
+functions, Python runs them as written (``BLDC_ACTUATOR_NO_NUMBA=1`` or no numba installed).
+
+Equations and integrator: see :mod:`bldc_actuator.model` (module docstring). The optional terms come from
+:mod:`bldc_actuator.effects` (compiled from the same source).
+"""
+
+from __future__ import annotations
+
+import cmath
+import math
+import os
+
+import numpy as np
+
+from . import effects
+
+try:  # pragma: no cover - exercised by the numba / no-numba CI runs
+    import numba as _numba
+except ImportError:  # pragma: no cover
+    _numba = None
+
+#: True when the kernel is compiled (numba importable and ``BLDC_ACTUATOR_NO_NUMBA`` not set to 1).
+COMPILED = _numba is not None and os.environ.get("BLDC_ACTUATOR_NO_NUMBA", "0") != "1"
+
+#: the most cogging harmonics the kernel carries (``effects.cogging_cos``/``_sin`` entries)
+MAX_COGGING_HARMONICS = 16
+
+
+def jit(fn):
+    """Compile ``fn`` with numba (``njit``, cached on disk) when :data:`COMPILED`, else return it as is."""
+    if not COMPILED:
+        return fn
+    return _numba.njit(cache=True, nogil=True)(fn)
+
+
+# -- layouts --------------------------------------------------------------------------------------------
+
+_COEF_SCALARS = (
+    "pole_pairs", "R_ref", "L", "K_ref", "J", "b", "T_ref", "alpha", "beta", "N", "V_bus", "V_max", "I_lim",
+    "T_c", "Kp", "Ki", "decouple", "T_derate", "T_trip", "T_amb", "R_wh", "R_ha", "C_w", "C_h",
+    "tau_c", "tau_asym", "tau_s", "omega_s", "cog_order", "load0", "load_g", "load_phi", "load_k", "load_k0",
+    "has_alpha", "has_beta", "has_stribeck", "has_friction", "has_position_load",
+)
+COEF_DTYPE = np.dtype(
+    [(name, np.float64) for name in _COEF_SCALARS]
+    + [("tick_ns", np.int64), ("n_cog", np.int64),
+       ("cog_cos", np.float64, (MAX_COGGING_HARMONICS,)), ("cog_sin", np.float64, (MAX_COGGING_HARMONICS,)),
+       ("th_tick", np.float64, (9,))]
+)
+STATE_DTYPE = np.dtype([
+    ("t_ns", np.int64), ("i", np.complex128), ("omega", np.float64), ("acc", np.float64),
+    ("theta", np.float64), ("T_w", np.float64), ("T_h", np.float64), ("v", np.complex128),
+    ("z", np.complex128), ("i_ref", np.float64), ("tripped", np.bool_), ("cmd_q", np.float64),
+    ("v_mode", np.bool_), ("v_cmd", np.complex128), ("tau_ext_out", np.float64),
+    ("e_in", np.float64), ("e_joule", np.float64), ("e_visc", np.float64), ("e_fric", np.float64),
+    ("e_load", np.float64), ("e_amb", np.float64), ("e_disc", np.float64),
+])
+
+
+class Record:
+    """A plain attribute bag: the pure-Python stand-in for one numpy record (same field names)."""
+
+    __slots__ = tuple(sorted(set(COEF_DTYPE.names) | set(STATE_DTYPE.names)))
+
+    def __init__(self, values: dict):
+        for key, value in values.items():
+            setattr(self, key, value)
+
+
+def _python_value(value):
+    """numpy scalar / sub-array -> the Python value the fallback kernel works with."""
+    if isinstance(value, np.ndarray):
+        return [float(x) for x in value]
+    if isinstance(value, np.bool_):
+        return bool(value)
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.complexfloating):
+        return complex(value)
+    return float(value)
+
+
+def to_records(arr: np.ndarray) -> list[Record]:
+    """Structured array -> list of :class:`Record` (the fallback's working form)."""
+    return [Record({name: _python_value(row[name]) for name in arr.dtype.names}) for row in arr]
+
+
+def from_records(records: list[Record], arr: np.ndarray) -> None:
+    """Write the fields of ``records`` back into the structured array ``arr`` (in place)."""
+    for name in arr.dtype.names:
+        arr[name] = [getattr(r, name) for r in records]
+
+
+# -- the optional terms, compiled from effects.py -------------------------------------------------------
+
+_friction_magnitude = jit(effects.friction_magnitude)
+_cogging_torque_mean = jit(effects.cogging_torque_mean)
+_position_load_torque_out = jit(effects.position_load_torque_out)
+_resistance_at = jit(effects.resistance_at)
+_flux_factor = jit(effects.flux_factor)
+_derate_scale = jit(effects.derate_scale)
+
+
+# -- thermal network ------------------------------------------------------------------------------------
+
+def thermal_matrices(R_wh, R_ha, C_w, C_h, h):
+    """``y(h) = Φ y(0) + Γ P`` for ``dy/dt = A y + g P`` (y = temperatures above ambient [K], P the Joule
+    power [W], constant over h [s]), and ``∫y dt = A⁻¹ (y(h) - y(0) - g P h)``. Closed-form 2×2 exponential
+    (Sylvester): the passive RC network has real, distinct, negative eigenvalues.
+    Returns ``(p11, p12, p21, p22, G1, G2, i21, i22, g1)``; floats or arrays (numpy broadcasting)."""
+    a11, a12 = -1.0 / (R_wh * C_w), 1.0 / (R_wh * C_w)
+    a21, a22 = 1.0 / (R_wh * C_h), -(1.0 / R_wh + 1.0 / R_ha) / C_h
+    tr, det = a11 + a22, a11 * a22 - a12 * a21
+    disc = np.sqrt(tr * tr / 4.0 - det)
+    l1, l2 = tr / 2.0 + disc, tr / 2.0 - disc
+    e1, e2 = np.exp(l1 * h), np.exp(l2 * h)
+    dl = l1 - l2
+    # Φ = (e1 (A - l2 I) - e2 (A - l1 I)) / (l1 - l2)
+    p11 = (e1 * (a11 - l2) - e2 * (a11 - l1)) / dl
+    p12 = (e1 - e2) * a12 / dl
+    p21 = (e1 - e2) * a21 / dl
+    p22 = (e1 * (a22 - l2) - e2 * (a22 - l1)) / dl
+    # A^-1
+    i11, i12, i21, i22 = a22 / det, -a12 / det, -a21 / det, a11 / det
+    g1 = 1.0 / C_w
+    # Γ = A^-1 (Φ - I) g
+    q1, q2 = (p11 - 1.0) * g1, p21 * g1
+    G1, G2 = i11 * q1 + i12 * q2, i21 * q1 + i22 * q2
+    return p11, p12, p21, p22, G1, G2, i21, i22, g1
+
+
+_thermal_matrices = jit(thermal_matrices)
+
+
+# -- the kernel -----------------------------------------------------------------------------------------
+
+@jit
+def _sign(x):
+    return 1.0 if x > 0.0 else (-1.0 if x < 0.0 else 0.0)
+
+
+@jit
+def current_limit(c, s):
+    """Effective current limit [A] for the present winding temperature and trip state (no state change)."""
+    if s.tripped:
+        return 0.0
+    return c.I_lim * _derate_scale(s.T_w, c.T_derate, c.T_trip)
+
+
+@jit
+def control_tick(c, s):
+    """One execution of the discrete d/q PI current controller; sets the voltage held until the next tick.
+    Thermal protection first: the trip latches at ``T_trip``. In voltage mode (``s.v_mode``) the PI is
+    bypassed and the commanded voltage is applied (limited to the inverter's circle)."""
+    if s.v_mode:
+        mag = abs(s.v_cmd)
+        s.v = s.v_cmd * (c.V_max / mag) if mag > c.V_max else s.v_cmd
+        s.i_ref = 0.0
+        return
+    s.tripped = s.tripped or s.T_w >= c.T_trip
+    lim = current_limit(c, s)
+    s.i_ref = min(max(s.cmd_q, -lim), lim)
+    err = 1j * s.i_ref - s.i                                   # i_d_ref = 0
+    v_ff = 0j
+    if c.decouple != 0.0:
+        v_ff = 1j * (c.pole_pairs * s.omega * c.L * s.i + c.K_ref * s.omega)
+    v_pi = c.Kp * err + s.z + v_ff
+    mag = abs(v_pi)
+    v = v_pi * (c.V_max / mag) if mag > c.V_max else v_pi
+    s.v = v
+    s.z = s.z + c.Ki * c.T_c * err + (v - v_pi)               # back-calculation anti-windup
+
+
+@jit
+def friction(c, num, den, w0, h):
+    """Mean speed ``w`` and friction torque ``τ_f`` (constant over the interval) from the mechanical
+    balance ``den·w = num - τ_f`` (implicit midpoint, see :func:`advance`), without a bristle state.
+
+    * moving: kinetic friction at the predicted mid-interval speed (one corrector pass, so a fast pass
+      through the Stribeck region is not evaluated at a stale speed);
+    * the speed would cross zero: up to the crossing time ``t*`` friction opposes the old direction; after
+      it the rotor either sticks (ends the interval at exactly 0, friction balancing the drive) or, when
+      the drive exceeds breakaway, slips the other way — friction is then the time-weighted mean of the
+      two phases, which keeps the result second-order accurate across step sizes;
+    * at rest: stays stuck while the drive torque is within static friction, else breaks away.
+    """
+    J2h = 2.0 * c.J / h                       # den = J2h + (b - K B); num = J2h w0 + drive(0)
+    d0 = _sign(w0)
+    F_mov = _friction_magnitude(d0, abs(w0), c.tau_c, c.tau_asym, c.tau_s, c.omega_s)
+    if c.has_stribeck != 0.0:
+        w_pred = (num - d0 * F_mov) / den
+        w_eval = w_pred if w_pred * w0 > 0.0 else 0.5 * w0
+        F_mov = _friction_magnitude(d0, abs(w_eval), c.tau_c, c.tau_asym, c.tau_s, c.omega_s)
+    w_mov = (num - d0 * F_mov) / den
+    crossed = w0 * (2.0 * w_mov - w0) < 0.0 and F_mov > 0.0
+    moving = w0 != 0.0
+    if moving and not crossed:                # the common case: sliding on
+        return w_mov, d0 * F_mov
+    # drive torque (everything but friction and inertia) at the crossing, w ~ 0
+    drive = num - J2h * w0
+    push = _sign(drive)
+    F_st = _friction_magnitude(push, 0.0, c.tau_c, c.tau_asym, c.tau_s, c.omega_s)
+    breaks = abs(drive) > F_st
+    if moving:
+        if crossed and breaks and push == -d0:
+            # crossing time: w0 + (drive - d0 F_mov) t*/J = 0
+            t_star = min(max(-c.J * w0 / (drive - d0 * F_mov), 0.0), h)
+            f_cross = (t_star * d0 * F_mov + (h - t_star) * push * F_st) / h
+            return (num - f_cross) / den, f_cross
+        return 0.5 * w0, num - den * 0.5 * w0   # crossed and sticks: ends the interval at rest
+    if breaks:
+        return (num - push * F_st) / den, push * F_st
+    return 0.0, drive
+
+
+@jit
+def advance(c, s, h_ns):
+    """Advance the plant by ``h_ns`` [ns] with the held voltage ``s.v``."""
+    h = h_ns * 1e-9
+    i0, w0, th0, v = s.i, s.omega, s.theta, s.v
+    R = _resistance_at(c.R_ref, s.T_w, c.T_ref, c.alpha, True) if c.has_alpha != 0.0 else c.R_ref
+    K = c.K_ref * _flux_factor(s.T_h, c.T_ref, c.beta, True) if c.has_beta != 0.0 else c.K_ref  # magnet at T_h
+    L, J = c.L, c.J
+    # electrical: L di/dt = v - (R + j p w0 L) i - j K ω(t), with the speed ramping linearly over the
+    # interval, ω(t) = w0 + r t, r = 2 (w - w0)/h (w = mean speed, found below). Exact solution:
+    # i(t) = c0 + c1 t + (i0 - c0) e^{-a t}, c1 = -j K r/(L a), c0 = (v - j K w0)/(L a) - c1/a.
+    # cross-coupling (does no work) at the predicted mid-interval speed, extrapolating the last acceleration
+    Z = R + 1j * c.pole_pairs * (w0 + 0.5 * h * s.acc) * L
+    a = Z / L
+    ah = a * h
+    E = cmath.exp(-ah)
+    phi1 = (1.0 - E) / ah                        # (1/h) ∫ e^{-at} dt
+    # mean current ī = c0 (1 - phi1) + c1 h/2 + i0 phi1, affine in w: split c0, c1 into parts
+    c1_w = -2j * K / (h * Z)                     # c1 = c1_w (w - w0)
+    c0_v = (v - 1j * K * w0) / Z
+    c0_w = -c1_w / a                             # c0 = c0_v + c0_w (w - w0)
+    m_w = c0_w * (1.0 - phi1) + c1_w * (0.5 * h)
+    A = (c0_v * (1.0 - phi1) + i0 * phi1 - m_w * w0).imag   # mean i_q = A + B w
+    B = m_w.imag
+    # external torques at the motor side, at the predicted mid-interval angle
+    if c.has_position_load != 0.0:
+        th_mid = th0 + 0.5 * h * w0
+        tau_other = _position_load_torque_out(th_mid / c.N, c.load0 + s.tau_ext_out, c.load_g,
+                                              c.load_phi, c.load_k, c.load_k0) / c.N
+    else:
+        tau_other = (c.load0 + s.tau_ext_out) / c.N
+    if c.n_cog > 0:
+        tau_other = tau_other + _cogging_torque_mean(th0, h * w0, c.cog_order, c.cog_cos[:c.n_cog],
+                                                     c.cog_sin[:c.n_cog])
+    # mechanical, implicit midpoint: J (w1 - w0)/h = K (A + B w) - b w - tau_other - tau_f, w = (w0 + w1)/2
+    den = 2.0 * J / h + c.b - K * B
+    num = 2.0 * J * w0 / h + K * A - tau_other
+    if c.has_friction != 0.0:
+        w, tau_f = friction(c, num, den, w0, h)
+    else:
+        w = num / den
+        tau_f = 0.0
+    w1 = 2.0 * w - w0
+    # electrical solution with that w
+    c1 = c1_w * (w - w0)
+    c0 = c0_v + c0_w * (w - w0)
+    d = i0 - c0
+    i1 = c0 + c1 * h + d * E
+    i_mean = c0 * (1.0 - phi1) + c1 * (0.5 * h) + i0 * phi1
+    # exact ∫|i|² dt and ∫ t i dt
+    sigma2h = 2.0 * (R / L) * h
+    phi2 = (1.0 - math.exp(-sigma2h)) / sigma2h
+    psi1 = (1.0 - E * (1.0 + ah)) / (ah * ah)   # (1/h²) ∫ t e^{-at} dt
+    joule = R * h * (abs(c0) ** 2 + (c0.conjugate() * c1).real * h + abs(c1) ** 2 * h * h / 3.0
+                     + 2.0 * (d * (c0.conjugate() * phi1 + c1.conjugate() * h * psi1)).real
+                     + abs(d) ** 2 * phi2)
+    int_t_iq = (c0 * (0.5 * h * h) + c1 * (h ** 3 / 3.0) + d * (h * h) * psi1).imag
+    conv_el = K * (w0 * i_mean.imag * h + (2.0 * (w - w0) / h) * int_t_iq)   # ∫ K ω(t) i_q dt
+    conv_mech = K * i_mean.imag * w * h                                        # work of the mean torque
+    dth = w * h
+    # thermal: exact for the interval-mean Joule power
+    if h_ns == c.tick_ns:
+        th = c.th_tick
+        p11, p12, p21, p22, G1, G2, i21, i22, g1 = th[0], th[1], th[2], th[3], th[4], th[5], th[6], th[7], th[8]
+    else:
+        p11, p12, p21, p22, G1, G2, i21, i22, g1 = _thermal_matrices(c.R_wh, c.R_ha, c.C_w, c.C_h, h)
+    P = joule / h
+    y1, y2 = s.T_w - c.T_amb, s.T_h - c.T_amb
+    n1 = p11 * y1 + p12 * y2 + G1 * P
+    n2 = p21 * y1 + p22 * y2 + G2 * P
+    int_y2 = i21 * (n1 - y1 - g1 * P * h) + i22 * (n2 - y2)
+    # ledger
+    s.e_in = s.e_in + (v.conjugate() * i_mean).real * h
+    s.e_joule = s.e_joule + joule
+    s.e_visc = s.e_visc + c.b * w * w * h
+    s.e_fric = s.e_fric + tau_f * dth
+    s.e_load = s.e_load + tau_other * dth
+    s.e_amb = s.e_amb + int_y2 / c.R_ha
+    s.e_disc = s.e_disc + (conv_el - conv_mech)
+    # commit
+    s.acc = (w1 - w0) / h
+    s.i = i1
+    s.omega = w1
+    s.theta = th0 + dth
+    s.T_w = n1 + c.T_amb
+    s.T_h = n2 + c.T_amb
+    s.t_ns = s.t_ns + h_ns
+
+
+@jit
+def step(c, s, dt_ns):
+    """Advance ``dt_ns``: the controller ticks at multiples of its period; intervals split where asked."""
+    tick = c.tick_ns
+    end = s.t_ns + dt_ns
+    while s.t_ns < end:
+        phase = s.t_ns % tick
+        if phase == 0:
+            control_tick(c, s)
+        advance(c, s, min(tick - phase, end - s.t_ns))
+
+
+@jit
+def step_all(cs, ss, dt_ns):
+    """Advance every actuator of a batch (``cs[k]``, ``ss[k]``) by ``dt_ns``."""
+    for k in range(len(ss)):
+        step(cs[k], ss[k], dt_ns)
+
+
+@jit
+def _warm_up_target(cs, ss):
+    step_all(cs, ss, 0)
+
+
+def warm_up() -> float:
+    """Compile (or load from numba's on-disk cache) the kernel now; returns the seconds it took. Call it
+    before real time starts (the node does) so the first ``step`` does not stall. A no-op without numba."""
+    import time
+
+    t0 = time.perf_counter()
+    if COMPILED:
+        cs = np.zeros(1, COEF_DTYPE)
+        ss = np.zeros(1, STATE_DTYPE)
+        cs["tick_ns"] = 100_000
+        step_all(cs, ss, 0)
+    return time.perf_counter() - t0
