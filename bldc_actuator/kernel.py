@@ -51,7 +51,8 @@ COEF_DTYPE = np.dtype(
     [(name, np.float64) for name in _COEF_SCALARS]
     + [("tick_ns", np.int64), ("n_cog", np.int64),
        ("cog_cos", np.float64, (MAX_COGGING_HARMONICS,)), ("cog_sin", np.float64, (MAX_COGGING_HARMONICS,)),
-       ("th_tick", np.float64, (9,))]
+       ("th_tick", np.float64, (9,))],
+    align=True,
 )
 STATE_DTYPE = np.dtype([
     ("t_ns", np.int64), ("i", np.complex128), ("omega", np.float64), ("acc", np.float64),
@@ -60,7 +61,7 @@ STATE_DTYPE = np.dtype([
     ("v_mode", np.bool_), ("v_cmd", np.complex128), ("tau_ext_out", np.float64),
     ("e_in", np.float64), ("e_joule", np.float64), ("e_visc", np.float64), ("e_fric", np.float64),
     ("e_load", np.float64), ("e_amb", np.float64), ("e_disc", np.float64),
-])
+], align=True)
 
 
 class Record:
@@ -325,11 +326,6 @@ def step_all(cs, ss, dt_ns):
     """Advance every actuator of a batch (``cs[k]``, ``ss[k]``) by ``dt_ns``."""
     for k in range(len(ss)):
         step(cs[k], ss[k], dt_ns)
-
-
-@jit
-def _warm_up_target(cs, ss):
-    step_all(cs, ss, 0)
 
 
 def warm_up() -> float:
