@@ -98,6 +98,7 @@ class ActuatorNode(Node):
                          parameter_overrides=parameter_overrides)
         self._lock = threading.RLock()
         self.recorder = None
+        self.recording_error = ""   # set once a write to the recording failed
         self._timer = None
         self.done = Future()
         try:
@@ -332,7 +333,10 @@ class ActuatorNode(Node):
             return
         data = serialize_message(msg)
         pub.publish(data)
-        rec.write_serialized(pub.topic_name, data, t_ns)
+        try:
+            rec.write_serialized(pub.topic_name, data, t_ns)
+        except Exception as exc:  # noqa: BLE001 - a recording fault never stops the actuator
+            self._recording_failed(exc)
 
     def diagnostic_status(self, o: dict | None = None) -> DiagnosticStatus:
         """The node's current diagnostics entry (level, message, key values); also resets the window."""
@@ -367,6 +371,9 @@ class ActuatorNode(Node):
         if self._win_rejected:
             level = max(level, WARN)
             why.append(f"{self._win_rejected} command(s) rejected: {self.last_rejection}")
+        if self.recording_error:
+            level = ERROR
+            why.append(self.recording_error)
         if self._win_slips:
             level = max(level, WARN)
             why.append(f"cannot keep time_factor {self._time_factor:g} (achieved {self.real_time_factor:.2f})")
@@ -388,6 +395,7 @@ class ActuatorNode(Node):
             "commands_received": str(self.commands_received),
             "commands_rejected": str(self.commands_rejected),
             "last_rejection": self.last_rejection,
+            "recording": self.recording_error or (str(self.node_values["node.record"]) if self.recorder else "off"),
         }
         status = DiagnosticStatus(level=level, name=f"{self.get_fully_qualified_name()}: actuator",
                                   message="; ".join(why) if why else "OK",
@@ -538,7 +546,22 @@ class ActuatorNode(Node):
         if rec.closed:   # finalised from outside (signal finalizer, atexit): stop recording quietly
             self.recorder = None
             return
-        rec.write(topic, msg, t_ns)
+        try:
+            rec.write(topic, msg, t_ns)
+        except Exception as exc:  # noqa: BLE001 - a recording fault never stops the actuator
+            self._recording_failed(exc)
+
+    def _recording_failed(self, exc: BaseException) -> None:
+        """A write to the recording failed (disk full, I/O error, ...): stop recording, say so once (log and
+        /diagnostics ERROR until the node ends), and carry on simulating and publishing."""
+        rec, self.recorder = self.recorder, None
+        if rec is not None and not rec.closed:
+            try:
+                rec.close()
+            except Exception:  # noqa: BLE001 - the file is already as complete as it can be
+                pass
+        self.recording_error = f"recording stopped: {exc}"
+        self.get_logger().error(f"{self.recording_error}; the actuator keeps running without recording")
 
     def _open_recorder(self, path: str) -> None:
         from .recording import McapRecorder

@@ -166,6 +166,12 @@ class RecorderClosedError(RuntimeError):
     """write()/add_topic() after close()."""
 
 
+class RecordingWriteError(OSError):
+    """Writing to the file failed (disk full, I/O error, file system gone). The recording has stopped: the
+    file was cut back to its last complete chunk (readable, unfinalized) and further writes raise
+    :class:`RecorderClosedError`. ``errno``/``strerror`` are those of the failed write."""
+
+
 # ============================================================================ message types and schemas
 
 _TYPE_RE = re.compile(r"^([a-zA-Z][a-zA-Z0-9_]*)/(?:(msg|srv)/)?([a-zA-Z][a-zA-Z0-9_]*)$")
@@ -482,6 +488,12 @@ class _DirectFile:
     def fsync(self) -> None:
         os.fsync(self._fd)
 
+    def truncate(self, size: int) -> None:
+        """Cut the file back to ``size`` bytes (drop a partly written chunk after a failed write)."""
+        os.ftruncate(self._fd, size)
+        os.lseek(self._fd, size, os.SEEK_SET)
+        self.pos = size
+
     def close(self) -> None:
         if self._fd >= 0:
             fd, self._fd = self._fd, -1
@@ -563,6 +575,7 @@ class McapRecorder:
         self._chunk_opened = 0.0
         self._flush_interval = flush_interval
         self.messages_written = 0
+        self.write_error: OSError | None = None   #: the OS error that stopped the recording, if any
 
         self._sink = _DirectFile(self.path)
         try:
@@ -670,8 +683,11 @@ class McapRecorder:
                                               f"message on {channel.topic} not written")
                 pos = self._sink.pos
                 channel.sequence += 1
-                self._writer.add_message(channel.id, log_time=t, data=data, publish_time=t,
-                                         sequence=channel.sequence)
+                try:
+                    self._writer.add_message(channel.id, log_time=t, data=data, publish_time=t,
+                                             sequence=channel.sequence)
+                except OSError as exc:
+                    self._fail(exc, pos)
                 self.messages_written += 1
                 if self._last_t_ns is None or t > self._last_t_ns:
                     self._last_t_ns = t
@@ -685,7 +701,7 @@ class McapRecorder:
                         if self._pending == 1:
                             self._chunk_opened = now
                         elif now - self._chunk_opened >= self._flush_interval:
-                            self._flush_chunk()
+                            self._guarded(self._flush_chunk)
                             self._pending = self._pending_bytes = 0
         finally:
             self._busy.discard(ident)
@@ -700,7 +716,7 @@ class McapRecorder:
             with self._lock:
                 self._check_open()
                 if self._pending:
-                    self._flush_chunk()
+                    self._guarded(self._flush_chunk)
                     self._pending = self._pending_bytes = 0
         finally:
             self._busy.discard(ident)
@@ -717,7 +733,7 @@ class McapRecorder:
                 if text != self._parameters_yaml:
                     first = self._parameters_yaml is None
                     self._parameters_yaml, self._parameters_flat = text, flat
-                    self._write_metadata("initial" if first and not self.messages_written else "update")
+                    self._guarded(self._write_metadata, "initial" if first and not self.messages_written else "update")
         finally:
             self._busy.discard(ident)
         self._fire_deferred_signal()
@@ -739,6 +755,32 @@ class McapRecorder:
             data["finalized_by"] = self._finalized_by
         self._writer.add_metadata(METADATA_NAME, data)
 
+    # -- write errors -----------------------------------------------------------------------------
+    def _guarded(self, fn, *args):
+        """Run a writer call that may write to the file; on an OS error stop recording (see :meth:`_fail`)."""
+        pos = self._sink.pos
+        try:
+            return fn(*args)
+        except OSError as exc:
+            self._fail(exc, pos)
+
+    def _fail(self, exc: OSError, good_pos: int) -> None:
+        """A write failed: cut the file back to ``good_pos`` (the end of the last complete chunk and its
+        indexes, so readers see a clean unfinalized recording), close it and raise
+        :class:`RecordingWriteError`. Called with the lock held."""
+        self._closed = True
+        self._finalized_by = f"write error: {exc.strerror or exc}"
+        self.write_error = exc
+        try:
+            self._sink.truncate(good_pos)
+        except OSError:
+            pass   # the partly written chunk stays; readers stop at the last complete one anyway
+        finally:
+            self._sink.close()
+            atexit.unregister(self._atexit_close)
+        raise RecordingWriteError(exc.errno, f"{exc.strerror or exc}; recording stopped, file kept up to its last "
+                                  f"complete chunk ({good_pos} bytes)", str(self.path)) from exc
+
     # -- closing ----------------------------------------------------------------------------------
     def _check_open(self) -> None:
         if self._closed:
@@ -756,18 +798,23 @@ class McapRecorder:
             with self._lock:
                 if self._closed:
                     return
-                self._closed = True
                 self._finalized_by = reason
                 error: BaseException | None = None
+                good = self._sink.pos   # the end of the last chunk the writer handed over
                 try:
                     try:
                         self._write_metadata("final")
                     except BaseException as exc:  # still try to write the summary
                         error = exc
-                    self._writer.finish()
+                    try:
+                        self._writer.finish()
+                        self._sink.fsync()
+                    except OSError as exc:   # disk full while finalizing: keep what was complete
+                        self._fail(exc, good)
+                    self._closed = True
                     self._pending = self._pending_bytes = 0
-                    self._sink.fsync()
                 finally:
+                    self._closed = True
                     self._sink.close()
                     atexit.unregister(self._atexit_close)
                 if error is not None:
@@ -1334,7 +1381,7 @@ def as_level(level: Any) -> int:
 
 
 __all__ = [
-    "McapRecorder", "Recording", "RecordingError", "RecorderClosedError", "install_signal_finalizer",
+    "McapRecorder", "Recording", "RecordingError", "RecorderClosedError", "RecordingWriteError", "install_signal_finalizer",
     "read_recording", "summarize", "parameters_from_recording", "message_definition", "type_hash",
     "type_name", "qos_yaml", "render_parameters", "parameters_from_yaml", "as_level",
     "DEFAULT_CHUNK_SIZE", "METADATA_NAME", "PARAMETERS_KEY",
