@@ -54,6 +54,7 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml"))),
+        (f"share/{PACKAGE}/config/foxglove", sorted(glob("config/foxglove/*.json"))),
     ],
     install_requires=["setuptools"],
     extras_require={"sim": SIM, "wheels": SIM + ROS_WHEELS, "test": TEST},
