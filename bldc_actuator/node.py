@@ -87,9 +87,71 @@ def _stamp(t_ns: int) -> TimeMsg:
     return TimeMsg(sec=t_ns // 1_000_000_000, nanosec=t_ns % 1_000_000_000)
 
 
+class _Joint:
+    """One simulated actuator of the node: its model, command state, topics and diagnostics window."""
+
+    def __init__(self, name: str, params, index: int):
+        self.name, self.index, self.params = name, index, params
+        self.actuator = Actuator(params)
+        self.command_kind = "current"            # "current" [A] | "torque" [N*m]
+        self.command_value = 0.0
+        self.last_command_ns: int | None = None  # watchdog armed by the first command
+        self.watchdog_active = False
+        self.commands_received = 0
+        self.commands_rejected = 0
+        self.last_rejection = ""
+        self.load_torque_extra = 0.0
+        self.win_saturated = 0
+        self.win_rejected = 0
+        self.last_outputs: dict | None = None
+        # ROS entities (set by the node)
+        self.pub_phase = self.pub_q = self.pub_tw = self.pub_th = None
+        self.sub_current = self.sub_torque = self.sub_load = self.sub_reset = None
+        self.m_phase = labelled_layout(Float64MultiArray(), PHASE_FIELDS)
+        self.m_q = labelled_layout(Float64MultiArray(), Q_AXIS_FIELDS)
+        self.m_tw, self.m_th = Temperature(), Temperature()
+        self.m_tw.header.frame_id = self.m_th.header.frame_id = name
+
+    def absurd_limit(self, kind: str) -> float:
+        """|command| beyond this is rejected as absurd (A, or N*m at the output)."""
+        i_max = ABSURD_FACTOR * self.params.drive.current_limit
+        if kind == "current":
+            return i_max
+        return i_max * self.params.motor.torque_constant_q * self.params.gear.gear_ratio
+
+
+def _joint_attr(name: str):
+    """Single-joint compatibility: ``node.<name>`` is joint 0's attribute."""
+    return property(lambda self: getattr(self.joints[0], name),
+                    lambda self, value: setattr(self.joints[0], name, value))
+
+
 class ActuatorNode(Node):
-    """The actuator node. Construct after ``rclpy.init``; add to an executor; ``done`` completes when
-    ``node.max_sim_time`` is reached. Call :meth:`close` (or ``destroy_node``) to finish a recording."""
+    """The actuator node: one or several joints (``joints`` parameter), each a simulated actuator.
+    Construct after ``rclpy.init``; add to an executor; ``done`` completes when ``node.max_sim_time`` is
+    reached. Call :meth:`close` (or ``destroy_node``) to finish a recording.
+
+    One joint (default): the topics of the module docstring. Several joints: ``joint_states`` holds all of
+    them, ``~/commands`` takes one value per joint in ``joints`` order, and every per-joint topic moves under
+    ``~/<joint>/`` (``~/knee/torque_command``, ``~/knee/q_axis_state``, ...)."""
+
+    actuator = _joint_attr("actuator")
+    params = _joint_attr("params")
+    command_kind = _joint_attr("command_kind")
+    command_value = _joint_attr("command_value")
+    watchdog_active = _joint_attr("watchdog_active")
+    load_torque_extra = _joint_attr("load_torque_extra")
+    _last_command_ns = _joint_attr("last_command_ns")
+    pub_phase = _joint_attr("pub_phase")
+    pub_q = _joint_attr("pub_q")
+    pub_tw = _joint_attr("pub_tw")
+    pub_th = _joint_attr("pub_th")
+    sub_current = _joint_attr("sub_current")
+    sub_torque = _joint_attr("sub_torque")
+    sub_load = _joint_attr("sub_load")
+    sub_reset = _joint_attr("sub_reset")
+    _m_phase = _joint_attr("m_phase")
+    _m_q = _joint_attr("m_q")
 
     def __init__(self, node_name: str = NODE_NAME, *, namespace: str | None = None, context=None,
                  cli_args: list[str] | None = None, parameter_overrides: list[Parameter] | None = None,
@@ -102,36 +164,33 @@ class ActuatorNode(Node):
         self._timer = None
         self.done = Future()
         try:
-            self.params, nv, self.preset = NP.declare_all(self)
+            base, nv, self.preset = NP.declare_all(self)
+            joint_params, explicit = NP.declare_joints(self, base, nv["node.joint_name"])
         except BaseException:
             self.destroy_node()
             raise
         self.node_values = nv
-        self.actuator = Actuator(self.params)
+        self.joints = [_Joint(name, p, k) for k, (name, p) in enumerate(joint_params.items())]
+        self.multi = explicit   # joints given: per-joint topics under ~/<joint>/
+        self.joint_name = self.joints[0].name
         self.period_ns = int(round(1e9 / nv["node.publish_rate"]))
         self.diag_period_ns = max(self.period_ns, int(round(1e9 / nv["node.diagnostics_rate"])))
-        self.joint_name = nv["node.joint_name"]
+        self.detail_period_ns = max(self.period_ns, int(round(1e9 / nv["node.detail_rate"]))) \
+            if nv["node.detail_rate"] > 0 else self.period_ns
         self.lock_step = nv["node.lock_step"]
         self.max_sim_ns = int(round(nv["node.max_sim_time"] * 1e9))
         self._watchdog_ns = int(round(nv["node.watchdog_timeout"] * 1e9))
         self._time_factor = nv["node.time_factor"]
         self._commands_interface = nv["node.commands_interface"]
 
-        # command state
-        self.command_kind = "current"            # "current" [A] | "torque" [N*m]
-        self.command_value = 0.0
-        self._last_command_ns: int | None = None  # watchdog armed by the first command
-        self.watchdog_active = False
         self.commands_received = 0
         self.commands_rejected = 0
         self.last_rejection = ""
         self.rejections: deque[str] = deque(maxlen=100)   # recent rejection reasons, newest last
-        self.load_torque_extra = 0.0
         # diagnostics window
         self._next_diag_ns = 0
+        self._next_detail_ns = 0
         self._win_periods = 0
-        self._win_saturated = 0
-        self._win_rejected = 0
         self._win_wall0 = time.monotonic_ns()
         self._win_sim0 = 0
         self.real_time_factor = float("nan")
@@ -141,33 +200,32 @@ class ActuatorNode(Node):
 
         qos = QoSProfile(depth=10)
         self._qos = qos
-        self.pub_joint = self.create_publisher(JointState, "joint_states", qos)
-        self.pub_phase = self.create_publisher(Float64MultiArray, "~/phase_currents", qos)
-        self.pub_q = self.create_publisher(Float64MultiArray, "~/q_axis_state", qos)
-        self.pub_tw = self.create_publisher(Temperature, "~/winding_temperature", qos)
-        self.pub_th = self.create_publisher(Temperature, "~/housing_temperature", qos)
+        self.pub_joint = self.create_publisher(JointState, nv["node.joint_states_topic"], qos)
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", qos)
         self.pub_clock = self.create_publisher(ClockMsg, "/clock", qos) if nv["node.publish_clock"] else None
         # deep command queues: in lock-step mode every command counts (one period each), even in bursts
         cq = QoSProfile(depth=COMMAND_QUEUE_DEPTH)
-        self.sub_current = self.create_subscription(Float64, "~/current_command", self._on_current, cq)
-        self.sub_torque = self.create_subscription(Float64, "~/torque_command", self._on_torque, cq)
+        for j in self.joints:
+            pre = f"~/{j.name}/" if self.multi else "~/"
+            j.pub_phase = self.create_publisher(Float64MultiArray, pre + "phase_currents", qos)
+            j.pub_q = self.create_publisher(Float64MultiArray, pre + "q_axis_state", qos)
+            j.pub_tw = self.create_publisher(Temperature, pre + "winding_temperature", qos)
+            j.pub_th = self.create_publisher(Temperature, pre + "housing_temperature", qos)
+            j.sub_current = self.create_subscription(
+                Float64, pre + "current_command", lambda m, j=j: self._on_scalar(j, j.sub_current, "current", m), cq)
+            j.sub_torque = self.create_subscription(
+                Float64, pre + "torque_command", lambda m, j=j: self._on_scalar(j, j.sub_torque, "torque", m), cq)
+            j.sub_load = self.create_subscription(Float64, pre + "load_torque", lambda m, j=j: self._on_load(j, m), cq)
+            j.sub_reset = self.create_subscription(Empty, pre + "reset_fault", lambda m, j=j: self._on_reset(j, m), qos)
         self.sub_commands = self.create_subscription(Float64MultiArray, "~/commands", self._on_commands, cq)
-        self.sub_load = self.create_subscription(Float64, "~/load_torque", self._on_load, cq)
-        self.sub_reset = self.create_subscription(Empty, "~/reset_fault", self._on_reset, qos)
+        topic = nv["node.joint_commands_topic"]
+        self.sub_joint_commands = self.create_subscription(JointState, topic, self._on_joint_commands, cq) \
+            if topic else None
 
         # reusable messages (rclpy serialises at publish; reuse is safe)
-        self._m_joint = JointState(name=[self.joint_name])
-        self._m_joint.header.frame_id = self.joint_name
-        self._m_phase = labelled_layout(Float64MultiArray(), PHASE_FIELDS)
-        self._m_q = labelled_layout(Float64MultiArray(), Q_AXIS_FIELDS)
-        self._m_tw = Temperature()
-        self._m_tw.header.frame_id = self.joint_name
-        self._m_th = Temperature()
-        self._m_th.header.frame_id = self.joint_name
+        self._m_joint = JointState(name=[j.name for j in self.joints])
+        self._m_joint.header.frame_id = self.joint_name if not self.multi else ""
         self._m_clock = ClockMsg()
-        self._outputs = (self.pub_joint, self._m_joint), (self.pub_phase, self._m_phase), \
-            (self.pub_q, self._m_q), (self.pub_tw, self._m_tw), (self.pub_th, self._m_th)
 
         record = nv["node.record"]
         if record:
@@ -196,11 +254,17 @@ class ActuatorNode(Node):
                 self._timer = None
             if self.recorder is not None:
                 rec, self.recorder = self.recorder, None
-                rec.close()
+                try:
+                    rec.close()
+                except Exception as exc:  # noqa: BLE001 - e.g. the disk filled while finalizing
+                    self.recording_error = f"recording stopped: {exc}"
                 # after a shutdown the node's logger cannot publish to /rosout any more
                 # (and a logger of the node's name would try to), so use an unrelated name then
                 logger = self.get_logger() if self.context.ok() else rclpy.logging.get_logger("actuator_node_exit")
-                logger.info(f"recording finished: {self.node_values['node.record']}")
+                if self.recording_error:
+                    logger.error(self.recording_error)
+                else:
+                    logger.info(f"recording finished: {self.node_values['node.record']}")
 
     def destroy_node(self):
         try:
@@ -211,7 +275,7 @@ class ActuatorNode(Node):
     @property
     def t_ns(self) -> int:
         """Simulation time [ns]."""
-        return self.actuator.t_ns
+        return self.joints[0].actuator.t_ns
 
     @property
     def finished(self) -> bool:
@@ -222,7 +286,7 @@ class ActuatorNode(Node):
     def _anchor(self) -> None:
         """Tie simulation time to the steady clock now (half a period ahead, so ticks land mid-period)."""
         f = self._time_factor
-        self._anchor_sim = self.actuator.t_ns
+        self._anchor_sim = self.t_ns
         self._anchor_wall = time.monotonic_ns() - (int(self.period_ns / (2 * f)) if 0 < f < math.inf else 0)
 
     @property
@@ -250,12 +314,12 @@ class ActuatorNode(Node):
                     break
             return
         target = self._anchor_sim + int((now - self._anchor_wall) * self._time_factor)
-        n = (target - self.actuator.t_ns) // self.period_ns
+        n = (target - self.t_ns) // self.period_ns
         limit = max(1, int(MAX_BATCH_WALL * self._time_factor * 1e9 / self.period_ns))
         if n > limit:  # cannot keep up: drop the debt instead of bursting later
             self.slips += 1
             self._win_slips += 1
-            self._anchor_sim = self.actuator.t_ns + limit * self.period_ns
+            self._anchor_sim = self.t_ns + limit * self.period_ns
             self._anchor_wall = now
             n = limit
         for _ in range(n):
@@ -272,53 +336,60 @@ class ActuatorNode(Node):
                 self._advance_period()
 
     def _advance_period(self) -> None:
-        act = self.actuator
-        t = act.t_ns
-        if (self._watchdog_ns > 0 and self._last_command_ns is not None and not self.watchdog_active
-                and t - self._last_command_ns >= self._watchdog_ns):
-            self.watchdog_active = True
-            act.set_current_command(0.0)
-            self.get_logger().warning(
-                f"command watchdog: no command for {self._watchdog_ns * 1e-9:g} s of simulation time; "
-                "current command set to zero until the next command")
+        t = self.t_ns
         step = self.period_ns
         if self.max_sim_ns:
             step = min(step, self.max_sim_ns - t)
-        if step > 0:
-            act.step_ns(step)
+        for j in self.joints:
+            if (self._watchdog_ns > 0 and j.last_command_ns is not None and not j.watchdog_active
+                    and t - j.last_command_ns >= self._watchdog_ns):
+                j.watchdog_active = True
+                j.actuator.set_current_command(0.0)
+                self.get_logger().warning(
+                    f"command watchdog{'' if not self.multi else ' (' + j.name + ')'}: no command for "
+                    f"{self._watchdog_ns * 1e-9:g} s of simulation time; current command set to zero until "
+                    "the next command")
+            if step > 0:
+                j.actuator.step_ns(step)
         self.periods += 1
         self._publish_state()
-        if self.max_sim_ns and act.t_ns >= self.max_sim_ns and not self.done.done():
-            self.get_logger().info(f"node.max_sim_time reached ({act.t_ns * 1e-9:g} s)")
-            self.done.set_result(act.t_ns)
+        if self.max_sim_ns and self.t_ns >= self.max_sim_ns and not self.done.done():
+            self.get_logger().info(f"node.max_sim_time reached ({self.t_ns * 1e-9:g} s)")
+            self.done.set_result(self.t_ns)
 
     # ------------------------------------------------------------------------------------ publishing
 
     def _publish_state(self) -> None:
-        act = self.actuator
-        o = act.outputs()
-        t_ns = act.t_ns
+        t_ns = self.t_ns
         stamp = _stamp(t_ns)
-        j = self._m_joint
-        j.header.stamp = stamp
-        j.position = [float(o["position_out"])]
-        j.velocity = [float(o["velocity_out"])]
-        j.effort = [float(o["effort_out"])]
-        self._m_phase.data = [float(o[k]) for k in PHASE_FIELDS]
-        self._m_q.data = [float(o[k]) for k in Q_AXIS_FIELDS]
-        self._m_tw.header.stamp = stamp
-        self._m_tw.temperature = float(o["T_winding"])
-        self._m_th.header.stamp = stamp
-        self._m_th.temperature = float(o["T_housing"])
+        outs = [j.actuator.outputs() for j in self.joints]
+        m = self._m_joint
+        m.header.stamp = stamp
+        m.position = [float(o["position_out"]) for o in outs]
+        m.velocity = [float(o["velocity_out"]) for o in outs]
+        m.effort = [float(o["effort_out"]) for o in outs]
         if self.pub_clock is not None:
             self._m_clock.clock = stamp
             self._publish(self.pub_clock, self._m_clock, t_ns)
-        for pub, msg in self._outputs:
-            self._publish(pub, msg, t_ns)
+        self._publish(self.pub_joint, m, t_ns)
+        detail = t_ns >= self._next_detail_ns
+        if detail:
+            self._next_detail_ns = t_ns - t_ns % self.detail_period_ns + self.detail_period_ns
+        for j, o in zip(self.joints, outs):
+            j.last_outputs = o
+            j.win_saturated += bool(o["voltage_saturated"])
+            if detail:
+                j.m_phase.data = [float(o[k]) for k in PHASE_FIELDS]
+                j.m_q.data = [float(o[k]) for k in Q_AXIS_FIELDS]
+                j.m_tw.header.stamp = j.m_th.header.stamp = stamp
+                j.m_tw.temperature = float(o["T_winding"])
+                j.m_th.temperature = float(o["T_housing"])
+                for pub, msg in ((j.pub_phase, j.m_phase), (j.pub_q, j.m_q), (j.pub_tw, j.m_tw),
+                                 (j.pub_th, j.m_th)):
+                    self._publish(pub, msg, t_ns)
         self._win_periods += 1
-        self._win_saturated += bool(o["voltage_saturated"])
         if t_ns >= self._next_diag_ns:
-            self._publish_diagnostics(o, t_ns)
+            self._publish_diagnostics(outs, t_ns)
             self._next_diag_ns = t_ns - t_ns % self.diag_period_ns + self.diag_period_ns
 
     def _publish(self, pub, msg, t_ns: int) -> None:
@@ -338,22 +409,34 @@ class ActuatorNode(Node):
         except Exception as exc:  # noqa: BLE001 - a recording fault never stops the actuator
             self._recording_failed(exc)
 
-    def diagnostic_status(self, o: dict | None = None) -> DiagnosticStatus:
-        """The node's current diagnostics entry (level, message, key values); also resets the window."""
-        act, p = self.actuator, self.params
+    def diagnostic_status(self, o: dict | None = None, joint: int = 0) -> DiagnosticStatus:
+        """The current diagnostics entry of one joint (level, message, key values); also resets the window."""
+        status = self._joint_status(self.joints[joint], o)
+        self._reset_window()
+        return status
+
+    def _reset_window(self) -> None:
+        self._win_periods = self._win_slips = 0
+        for j in self.joints:
+            j.win_saturated = j.win_rejected = 0
+        self._win_wall0, self._win_sim0 = time.monotonic_ns(), self.t_ns
+
+    def _joint_status(self, j: _Joint, o: dict | None) -> DiagnosticStatus:
+        act, p = j.actuator, j.params
         o = act.outputs() if o is None else o
         t_ns = act.t_ns
         wall = time.monotonic_ns()
         if wall > self._win_wall0 and t_ns > self._win_sim0:
             self.real_time_factor = (t_ns - self._win_sim0) / (wall - self._win_wall0)
-        sat = self._win_saturated / self._win_periods if self._win_periods else 0.0
+        sat = j.win_saturated / self._win_periods if self._win_periods else 0.0
         level, why = OK, []
         lim_eff, lim = float(o["current_limit_effective"]), p.drive.current_limit
         T_w = float(o["T_winding"])
+        reset_topic = f"~/{j.name}/reset_fault" if self.multi else "~/reset_fault"
         if o["tripped"]:
             level = ERROR
             why.append(f"over-temperature TRIP (winding {T_w:.1f} degC, trip at {p.drive.trip_temperature:g}); "
-                       "latched: publish std_msgs/Empty on ~/reset_fault")
+                       f"latched: publish std_msgs/Empty on {reset_topic}")
         elif lim_eff < (1.0 - DERATE_ERROR_FRACTION) * lim:
             level = ERROR
             why.append(f"thermal derating beyond {DERATE_ERROR_FRACTION:.0%}: current limit {lim_eff:.2f} of "
@@ -365,12 +448,12 @@ class ActuatorNode(Node):
         if sat > 0:
             level = max(level, WARN)
             why.append(f"voltage saturation {sat:.0%} of the last {self._win_periods} periods")
-        if self.watchdog_active:
+        if j.watchdog_active:
             level = max(level, WARN)
             why.append(f"command watchdog: no command for {self._watchdog_ns * 1e-9:g} s, holding zero current")
-        if self._win_rejected:
+        if j.win_rejected:
             level = max(level, WARN)
-            why.append(f"{self._win_rejected} command(s) rejected: {self.last_rejection}")
+            why.append(f"{j.win_rejected} command(s) rejected: {j.last_rejection}")
         if self.recording_error:
             level = ERROR
             why.append(self.recording_error)
@@ -382,7 +465,7 @@ class ActuatorNode(Node):
             "real_time_factor": f"{self.real_time_factor:.3f}",
             "mode": "lock_step" if self.lock_step else
                     "as_fast_as_possible" if self.as_fast_as_possible else f"time_factor {self._time_factor:g}",
-            "command": f"{self.command_kind} {self.command_value:g}",
+            "command": f"{j.command_kind} {j.command_value:g}",
             "i_q [A]": f"{o['i_q']:.4f}", "i_q_ref [A]": f"{o['i_q_ref']:.4f}",
             "v_magnitude_q [V]": f"{o['v_magnitude_q']:.4f}", "v_limit_q [V]": f"{o['v_limit_q']:.4f}",
             "voltage_saturated_fraction": f"{sat:.3f}",
@@ -391,109 +474,138 @@ class ActuatorNode(Node):
             "housing_temperature [degC]": f"{o['T_housing']:.3f}",
             "current_limit_effective [A]": f"{lim_eff:.4f}",
             "tripped": str(bool(o["tripped"])).lower(),
-            "watchdog_active": str(self.watchdog_active).lower(),
-            "commands_received": str(self.commands_received),
-            "commands_rejected": str(self.commands_rejected),
-            "last_rejection": self.last_rejection,
+            "watchdog_active": str(j.watchdog_active).lower(),
+            "commands_received": str(j.commands_received),
+            "commands_rejected": str(j.commands_rejected),
+            "last_rejection": j.last_rejection,
             "recording": self.recording_error or (str(self.node_values["node.record"]) if self.recorder else "off"),
         }
-        status = DiagnosticStatus(level=level, name=f"{self.get_fully_qualified_name()}: actuator",
-                                  message="; ".join(why) if why else "OK",
-                                  hardware_id=self.joint_name,
-                                  values=[KeyValue(key=k, value=v) for k, v in values.items()])
-        self._win_periods = self._win_saturated = self._win_rejected = self._win_slips = 0
-        self._win_wall0, self._win_sim0 = wall, t_ns
-        return status
+        name = f"{self.get_fully_qualified_name()}: " + (j.name if self.multi else "actuator")
+        return DiagnosticStatus(level=level, name=name, message="; ".join(why) if why else "OK",
+                                hardware_id=j.name, values=[KeyValue(key=k, value=v) for k, v in values.items()])
 
-    def _publish_diagnostics(self, o: dict, t_ns: int) -> None:
-        msg = DiagnosticArray(status=[self.diagnostic_status(o)])
+    def _publish_diagnostics(self, outs: list[dict], t_ns: int) -> None:
+        msg = DiagnosticArray(status=[self._joint_status(j, o) for j, o in zip(self.joints, outs)])
+        self._reset_window()
         msg.header.stamp = _stamp(t_ns)
         self._publish(self.pub_diag, msg, t_ns)
 
     # ------------------------------------------------------------------------------------ commands
 
-    def _reject(self, topic: str, reason: str) -> None:
+    def _reject(self, j: _Joint | None, topic: str, reason: str) -> None:
         self.commands_rejected += 1
-        self._win_rejected += 1
         self.last_rejection = f"{topic}: {reason}"
         self.rejections.append(self.last_rejection)
+        for jj in ([j] if j is not None else self.joints):
+            jj.commands_rejected += 1
+            jj.win_rejected += 1
+            jj.last_rejection = self.last_rejection
         self.get_logger().warning(f"rejected command on {topic}: {reason}", throttle_duration_sec=1.0)
 
     def _record_in(self, sub, msg) -> None:
         if self.recorder is not None:
-            self._write(sub.topic_name, msg, self.actuator.t_ns)
+            self._write(sub.topic_name, msg, self.t_ns)
 
-    def _absurd_limit(self, kind: str) -> float:
-        i_max = ABSURD_FACTOR * self.params.drive.current_limit
-        if kind == "current":
-            return i_max
-        return i_max * self.params.motor.torque_constant_q * self.params.gear.gear_ratio
+    def _apply(self, j: _Joint, topic: str, kind: str, value) -> bool:
+        """Validate and apply one joint's command; False (and counted, reported) when rejected."""
+        unit = "A" if kind == "current" else "N*m"
+        if not isinstance(value, float) or not math.isfinite(value):
+            self._reject(j, topic, f"{kind} command{self._for(j)} must be a finite number [{unit}], got {value!r}")
+            return False
+        if abs(value) > j.absurd_limit(kind):
+            self._reject(j, topic, f"{kind} command{self._for(j)} {value:g} {unit} is absurd (more than "
+                         f"{ABSURD_FACTOR:g} x drive.current_limit: |value| <= {j.absurd_limit(kind):g} {unit})")
+            return False
+        try:
+            if kind == "current":
+                j.actuator.set_current_command(value)
+            else:
+                j.actuator.set_torque_command(value)
+        except Exception as exc:  # noqa: BLE001 - the node never dies on a message
+            self._reject(j, topic, f"{type(exc).__name__}: {exc}")
+            return False
+        j.command_kind, j.command_value = kind, value
+        j.commands_received += 1
+        self.commands_received += 1
+        j.last_command_ns = j.actuator.t_ns
+        if j.watchdog_active:
+            j.watchdog_active = False
+            self.get_logger().info(f"command watchdog cleared{self._for(j)}: commands are back")
+        return True
 
-    def _command(self, sub, kind: str, value) -> None:
-        """Validate and apply one command; in lock-step mode advance one period (also after a rejection,
-        so a controller waiting for joint_states never stalls)."""
+    def _for(self, j: _Joint) -> str:
+        return f" for joint {j.name}" if self.multi else ""
+
+    def _lock_step_period(self) -> None:
+        """In lock-step mode a command (also a rejected one, so a controller waiting for joint_states never
+        stalls) advances one period."""
+        if self.lock_step and not self.finished:
+            self._advance_period()
+
+    def _on_scalar(self, j: _Joint, sub, kind: str, msg: Float64) -> None:
+        self._record_in(sub, msg)
         with self._lock:
-            try:
-                unit = "A" if kind == "current" else "N*m"
-                if not isinstance(value, float) or not math.isfinite(value):
-                    self._reject(sub.topic_name, f"{kind} command must be a finite number [{unit}], got {value!r}")
-                elif abs(value) > self._absurd_limit(kind):
-                    self._reject(sub.topic_name, f"{kind} command {value:g} {unit} is absurd (more than "
-                                 f"{ABSURD_FACTOR:g} x drive.current_limit: |value| <= "
-                                 f"{self._absurd_limit(kind):g} {unit})")
-                else:
-                    if kind == "current":
-                        self.actuator.set_current_command(value)
-                    else:
-                        self.actuator.set_torque_command(value)
-                    self.command_kind, self.command_value = kind, value
-                    self.commands_received += 1
-                    self._last_command_ns = self.actuator.t_ns
-                    if self.watchdog_active:
-                        self.watchdog_active = False
-                        self.get_logger().info("command watchdog cleared: commands are back")
-            except Exception as exc:  # noqa: BLE001 - the node never dies on a message
-                self._reject(sub.topic_name, f"{type(exc).__name__}: {exc}")
-            if self.lock_step and not self.finished:
-                self._advance_period()
-
-    def _on_current(self, msg: Float64) -> None:
-        self._record_in(self.sub_current, msg)
-        self._command(self.sub_current, "current", msg.data)
-
-    def _on_torque(self, msg: Float64) -> None:
-        self._record_in(self.sub_torque, msg)
-        self._command(self.sub_torque, "torque", msg.data)
+            self._apply(j, sub.topic_name, kind, msg.data)
+            if not self.multi:   # several joints: only whole-robot commands advance a lock-step period
+                self._lock_step_period()
 
     def _on_commands(self, msg: Float64MultiArray) -> None:
+        """ros2_control ForwardCommandController convention: one value per joint, ``joints`` order."""
         self._record_in(self.sub_commands, msg)
         kind = "torque" if self._commands_interface == "effort" else "current"
-        if len(msg.data) != 1:
-            with self._lock:
-                self._reject(self.sub_commands.topic_name,
-                             f"expected 1 element (one joint, {self._commands_interface}), got {len(msg.data)}")
-                if self.lock_step and not self.finished:
-                    self._advance_period()
-            return
-        self._command(self.sub_commands, kind, float(msg.data[0]))
+        topic = self.sub_commands.topic_name
+        with self._lock:
+            if len(msg.data) != len(self.joints):
+                names = ", ".join(j.name for j in self.joints)
+                self._reject(None, topic, f"expected {len(self.joints)} element(s) ({self._commands_interface} "
+                             f"for {names}), got {len(msg.data)}")
+            else:
+                for j, value in zip(self.joints, msg.data):
+                    self._apply(j, topic, kind, float(value))
+            self._lock_step_period()
 
-    def _on_load(self, msg: Float64) -> None:
-        self._record_in(self.sub_load, msg)
+    def _on_joint_commands(self, msg: JointState) -> None:
+        """sensor_msgs/JointState commands as ros2_control's topic_based hardware interface sends them: all
+        joint names; ``effort`` filled for joints with an effort command interface (in ``name`` order).
+        Position or velocity commands are rejected (this node is a torque-controlled actuator)."""
+        self._record_in(self.sub_joint_commands, msg)
+        topic = self.sub_joint_commands.topic_name
+        with self._lock:
+            by_name = {j.name: j for j in self.joints}
+            names = list(msg.name)
+            if (len(msg.position) or len(msg.velocity)) and not len(msg.effort):
+                self._reject(None, topic, "position/velocity commands are not supported: give each joint only "
+                             "<command_interface name=\"effort\"/> (output torque [N*m]) in <ros2_control>")
+            elif len(msg.effort) != len(names):
+                self._reject(None, topic, f"expected one effort per name ({len(names)} names, "
+                             f"{len(msg.effort)} efforts); mixed command interfaces are not supported")
+            else:
+                unknown = [n for n in names if n not in by_name]
+                if unknown:
+                    self._reject(None, topic, f"unknown joint(s) {', '.join(unknown)} "
+                                 f"(this node has {', '.join(by_name)})")
+                for name, value in zip(names, msg.effort):
+                    if name in by_name:
+                        self._apply(by_name[name], topic, "torque", float(value))
+            self._lock_step_period()
+
+    def _on_load(self, j: _Joint, msg: Float64) -> None:
+        self._record_in(j.sub_load, msg)
         with self._lock:
             v = msg.data
             if not math.isfinite(v) or abs(v) > SPECS["load.load_torque"].range[1]:
-                self._reject(self.sub_load.topic_name, f"load torque must be finite and within "
+                self._reject(j, j.sub_load.topic_name, f"load torque must be finite and within "
                              f"+-{SPECS['load.load_torque'].range[1]:g} N*m, got {v!r}")
                 return
-            self.actuator.set_load_torque(v)
-            self.load_torque_extra = v
+            j.actuator.set_load_torque(v)
+            j.load_torque_extra = v
 
-    def _on_reset(self, msg: Empty) -> None:
-        self._record_in(self.sub_reset, msg)
+    def _on_reset(self, j: _Joint, msg: Empty) -> None:
+        self._record_in(j.sub_reset, msg)
         with self._lock:
-            was = self.actuator.state.tripped
-            self.actuator.reset_fault()
-            self.get_logger().info("fault reset" + ("" if was else " (no trip was latched)"))
+            was = j.actuator.state.tripped
+            j.actuator.reset_fault()
+            self.get_logger().info(f"fault reset{self._for(j)}" + ("" if was else " (no trip was latched)"))
 
     # ------------------------------------------------------------------------------------ parameters
 
@@ -506,13 +618,14 @@ class ActuatorNode(Node):
                     model[p.name] = NP.from_ros(SPECS[p.name].type, p.value)
                 elif p.name in NP.NODE_PARAMS:
                     node[p.name] = NP.check_node_value(p.name, p.value)
-            new = from_flat(model, base=self.params) if model else None
+            new = [from_flat(model, base=j.params) for j in self.joints] if model else None
         except ParameterError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         with self._lock:
-            if new is not None:
-                self.actuator.update_params(new)
-                self.params = new
+            if new is not None:   # a node-level model parameter applies to every joint
+                for j, params in zip(self.joints, new):
+                    j.actuator.update_params(params)
+                    j.params = params
             for name, value in node.items():
                 self.node_values[name] = value
                 if name == "node.time_factor":
@@ -526,17 +639,26 @@ class ActuatorNode(Node):
             if self.recorder is not None and (model or node):
                 ev = ParameterEvent(node=self.get_fully_qualified_name(),
                                     changed_parameters=[p.to_parameter_msg() for p in plist])
-                ev.stamp = _stamp(self.actuator.t_ns)
-                self._write("/parameter_events", ev, self.actuator.t_ns)
+                ev.stamp = _stamp(self.t_ns)
+                self._write("/parameter_events", ev, self.t_ns)
                 if self.recorder is not None:
-                    self.recorder.set_parameters(self.all_parameters())
+                    try:
+                        self.recorder.set_parameters(self.all_parameters())
+                    except Exception as exc:  # noqa: BLE001
+                        self._recording_failed(exc)
         return SetParametersResult(successful=True)
 
     def all_parameters(self) -> dict[str, Any]:
-        """Flat dict of everything that defines the run: every model parameter, ``node.*``, ``preset``."""
-        out: dict[str, Any] = {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.params.to_flat().items()}
+        """Flat dict of everything that defines the run: every model parameter (of the first joint), ``node.*``,
+        ``preset``; with several joints also ``joints`` and every joint's full set as ``joint.<name>.<param>``."""
+        flat = lambda p: {k: (list(v) if isinstance(v, tuple) else v) for k, v in p.to_flat().items()}  # noqa: E731
+        out: dict[str, Any] = flat(self.joints[0].params)
         out.update(self.node_values)
         out["preset"] = self.preset
+        if self.multi:
+            out[NP.JOINTS] = [j.name for j in self.joints]
+            for j in self.joints:
+                out.update({f"{NP.JOINT_PREFIX}{j.name}.{k}": v for k, v in flat(j.params).items()})
         return out
 
     # ------------------------------------------------------------------------------------ recording
@@ -567,12 +689,17 @@ class ActuatorNode(Node):
         from .recording import McapRecorder
 
         meta = {"node": self.get_fully_qualified_name(), "joint_name": self.joint_name,
+                "joints": ",".join(j.name for j in self.joints),
                 "time": "log_time = simulation time [ns]", "package": "bldc_actuator"}
         self.recorder = McapRecorder(path, parameters=self.all_parameters(), metadata=meta)
-        topics = [(self.pub_joint, JointState), (self.pub_phase, Float64MultiArray),
-                  (self.pub_q, Float64MultiArray), (self.pub_tw, Temperature), (self.pub_th, Temperature),
-                  (self.pub_diag, DiagnosticArray), (self.sub_current, Float64), (self.sub_torque, Float64),
-                  (self.sub_commands, Float64MultiArray), (self.sub_load, Float64), (self.sub_reset, Empty)]
+        topics = [(self.pub_joint, JointState), (self.pub_diag, DiagnosticArray),
+                  (self.sub_commands, Float64MultiArray)]
+        if self.sub_joint_commands is not None:
+            topics.append((self.sub_joint_commands, JointState))
+        for j in self.joints:
+            topics += [(j.pub_phase, Float64MultiArray), (j.pub_q, Float64MultiArray), (j.pub_tw, Temperature),
+                       (j.pub_th, Temperature), (j.sub_current, Float64), (j.sub_torque, Float64),
+                       (j.sub_load, Float64), (j.sub_reset, Empty)]
         if self.pub_clock is not None:
             topics.append((self.pub_clock, ClockMsg))
         for ent, mtype in topics:

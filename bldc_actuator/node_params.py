@@ -71,7 +71,21 @@ NODE_PARAMS: dict[str, NodeParam] = {p.name: p for p in (
               "/diagnostics", (0.01, 1000.0)),
     NodeParam("node.max_sim_time", float, 0.0, "s", "stop (and finish the recording) after this much "
               "simulation time; 0 = run until shut down", (0.0, 1e9)),
+    NodeParam("node.joint_states_topic", str, "joint_states", "", "topic of the sensor_msgs/JointState with "
+              "every joint (ros2_control's topic_based hardware interface reads /robot_joint_states)"),
+    NodeParam("node.joint_commands_topic", str, "~/joint_commands", "", "topic of sensor_msgs/JointState "
+              "commands, joints matched by name, effort = output torque [N*m] (ros2_control's topic_based "
+              "hardware interface publishes /robot_joint_command); empty = off"),
+    NodeParam("node.detail_rate", float, 0.0, "Hz", "rate (per second of simulation time) of the per-joint "
+              "~/[<joint>/]q_axis_state, phase_currents and temperatures; 0 = every publish period",
+              (0.0, 100000.0)),
 )}
+
+#: list of joint names (string array, top level): ``-p joints:="[hip, knee, ankle]"``; empty = one joint
+#: (``node.joint_name``) with the single-actuator topic names
+JOINTS = "joints"
+#: per-joint parameters: ``joint.<name>.preset``, ``joint.<name>.params_file``, ``joint.<name>.<model param>``
+JOINT_PREFIX = "joint."
 
 #: overrides that are neither model nor node parameters but legitimate (ROS itself)
 _FOREIGN_OK_PREFIXES = ("use_sim_time", "qos_overrides.", "start_type_description_service")
@@ -193,7 +207,8 @@ def declare_all(node) -> tuple[P.ActuatorParams, dict[str, Any], str]:
         value = _declare(node, name, spec.type, spec.default, describe(spec, runtime=spec.runtime), spec.unit)
         node_values[name] = check_node_value(name, value)
     for name in _overrides(node):
-        if node.has_parameter(name) or name.startswith("datasheet.") or name.startswith(_FOREIGN_OK_PREFIXES):
+        if (node.has_parameter(name) or name.startswith("datasheet.") or name.startswith(_FOREIGN_OK_PREFIXES)
+                or name.startswith(JOINT_PREFIX) or name == JOINTS):
             continue
         section = name.split(".", 1)[0]
         if section in P.SECTIONS or section == "node":
@@ -214,3 +229,65 @@ def check_node_value(name: str, value: Any) -> Any:
         if math.isnan(value) or not (lo <= value <= hi):
             raise P.ParameterError(name, f"{value!r} is outside [{lo:g}, {hi:g}] {spec.unit}".rstrip())
     return value
+
+
+def declare_joints(node, base: P.ActuatorParams, default_name: str) -> tuple[dict[str, P.ActuatorParams], bool]:
+    """Declare ``joints`` and every ``joint.<name>.*`` parameter; return each joint's model parameters in
+    ``joints`` order. A joint's parameters: its ``joint.<name>.preset`` or ``joint.<name>.params_file`` (a
+    parameter YAML in the node's layout), else the node's own model parameters ``base``; then any
+    ``joint.<name>.<model parameter>`` override (e.g. ``joint.knee.drive.bus_voltage``). ``joints`` not given:
+    one joint ``default_name`` with ``base``. Returns ``(params by joint, joints given explicitly)``. Raises
+    :class:`params.ParameterError` naming the parameter."""
+    ov = _overrides(node)
+    given = ov.get(JOINTS)
+    if given is not None and given.type_ == Parameter.Type.STRING and given.value:   # -p joints:=knee
+        ov[JOINTS] = Parameter(JOINTS, Parameter.Type.STRING_ARRAY, [given.value])
+    explicit = JOINTS in ov
+    try:
+        p = node.declare_parameter(JOINTS, [default_name], ParameterDescriptor(
+            description="joint names of this node, one simulated actuator each (e.g. [hip, knee, ankle]); "
+                        "not given = one joint named node.joint_name with the single-actuator topic names; "
+                        "read-only", read_only=True))
+    except InvalidParameterTypeException as exc:
+        raise P.ParameterError(JOINTS, f"wrong type: expected a list of joint names ({exc})") from None
+    names = list(p.value or [])
+    if not names:
+        raise P.ParameterError(JOINTS, "expected at least one joint name")
+    bad = [n for n in names if not n or not n.replace("_", "").isalnum() or not n[0].isalpha()]
+    if bad or len(set(names)) != len(names):
+        raise P.ParameterError(JOINTS, f"expected distinct names of letters, digits and '_' starting with a "
+                               f"letter (they become topic names), got {names!r}")
+    out: dict[str, P.ActuatorParams] = {}
+    for name in names:
+        prefix = f"{JOINT_PREFIX}{name}."
+        mine = {k[len(prefix):]: v for k, v in ov.items() if k.startswith(prefix)}
+        source = ""
+        for key in ("preset", "params_file"):
+            par = node.declare_parameter(prefix + key, "", ParameterDescriptor(
+                description=f"{'preset name' if key == 'preset' else 'parameter YAML file'} for joint "
+                            f"{name}; read-only", read_only=True))
+            if par.value:
+                if source:
+                    raise P.ParameterError(prefix + key, f"give {prefix}preset or {prefix}params_file, not both")
+                source = par.value
+        try:
+            params = P.load_preset(source) if source else base
+        except (FileNotFoundError, P.ParameterError, ValueError) as exc:
+            raise P.ParameterError(prefix + ("preset" if "preset" in mine else "params_file"), str(exc)) from None
+        overrides: dict[str, Any] = {}
+        for key, par in mine.items():
+            if key in ("preset", "params_file"):
+                continue
+            if key not in P.SPECS:
+                raise P.ParameterError(prefix + key, "unknown parameter (expected preset, params_file or a model "
+                                       "parameter such as drive.bus_voltage)")
+            spec = P.SPECS[key]
+            _coerce_override(node, prefix + key, spec.type)
+            value = _declare(node, prefix + key, spec.type, P.to_flat(params)[key],
+                             describe(spec, runtime=False), spec.unit)
+            overrides[key] = value
+        out[name] = P.from_flat(overrides, base=params) if overrides else params
+    for key in ov:
+        if key.startswith(JOINT_PREFIX) and key.split(".")[1] not in out:
+            raise P.ParameterError(key, f"no such joint (joints: {', '.join(out)})")
+    return out, explicit
