@@ -484,9 +484,15 @@ class ActuatorNode(Node):
         return DiagnosticStatus(level=level, name=name, message="; ".join(why) if why else "OK",
                                 hardware_id=j.name, values=[KeyValue(key=k, value=v) for k, v in values.items()])
 
-    def _publish_diagnostics(self, outs: list[dict], t_ns: int) -> None:
-        msg = DiagnosticArray(status=[self._joint_status(j, o) for j, o in zip(self.joints, outs)])
+    def diagnostic_statuses(self, outs: list[dict] | None = None) -> list[DiagnosticStatus]:
+        """One diagnostics status per joint (and the window reset)."""
+        outs = outs or [None] * len(self.joints)
+        statuses = [self._joint_status(j, o) for j, o in zip(self.joints, outs)]
         self._reset_window()
+        return statuses
+
+    def _publish_diagnostics(self, outs: list[dict], t_ns: int) -> None:
+        msg = DiagnosticArray(status=self.diagnostic_statuses(outs))
         msg.header.stamp = _stamp(t_ns)
         self._publish(self.pub_diag, msg, t_ns)
 

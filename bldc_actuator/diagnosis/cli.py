@@ -25,7 +25,9 @@ def register(subparsers) -> None:
                               epilog="effects: " + ", ".join(EFFECT_NAMES))
     p.add_argument("recording", metavar="RECORDING", help="CSV or MCAP recording")
     p.add_argument("--params", required=True, metavar="PARAMS.yaml",
-                   help="nominal parameter file (the node's YAML) or a preset name")
+                   help="nominal parameters: a parameter file (the node's YAML), a preset name, 'defaults' "
+                        "(the built-in defaults) or 'recording' (the parameters stored in this MCAP recording)")
+    p.add_argument("--joint", metavar="NAME", help="the joint to diagnose in a multi-joint actuator_node recording")
     p.add_argument("--map", action="append", default=[], metavar="CANONICAL=EXPR",
                    help="rename/scale a column, e.g. velocity=speed*9 (repeatable)")
     p.add_argument("--map-file", metavar="F", help="YAML mapping {canonical: expression}")
@@ -50,19 +52,27 @@ def _fail(msg: str) -> int:
     return 2
 
 
-def _load(path: str, mapping, params):
+def _load(path: str, mapping, params, joint=None):
     from . import cleaning, loaders
 
-    raw = loaders.load(path, mapping=mapping, params=params)
-    return cleaning.clean(raw, params=params)
+    raw = loaders.load(path, mapping=mapping, params=params, joint=joint)
+    if params is None:   # --params recording
+        params = raw.meta.get("params_from_recording")
+        if params is None:
+            raise ValueError(f"--params recording: {path} stores no (readable) model parameters; give a "
+                             "parameter file, a preset or 'defaults'")
+    return cleaning.clean(raw, params=params), params
 
 
 def run(args) -> int:
     from ..params import ParameterError, load_preset
     from .pipeline import DiagnoseOptions, diagnose
 
+    from ..params import ActuatorParams
+
     try:
-        params = load_preset(args.params)
+        params = (None if args.params == "recording" else ActuatorParams() if args.params == "defaults"
+                  else load_preset(args.params))
     except (ParameterError, FileNotFoundError) as exc:
         return _fail(f"--params {args.params}: {exc}")
     try:
@@ -92,8 +102,8 @@ def run(args) -> int:
     try:
         if progress:
             print(f"[diagnose] loading {args.recording}", file=sys.stderr, flush=True)
-        signals = _load(args.recording, mapping, params)
-        holdout_signals = _load(args.holdout_file, mapping, params) if args.holdout_file else None
+        signals, params = _load(args.recording, mapping, params, args.joint)
+        holdout_signals = _load(args.holdout_file, mapping, params, args.joint)[0] if args.holdout_file else None
     except (ValueError, OSError) as exc:    # LoadError is a ValueError
         return _fail(str(exc))
     options = DiagnoseOptions(effects=effects, holdout=args.holdout, holdout_signals=holdout_signals,

@@ -177,14 +177,17 @@ class Mapping:
 
 # ============================================================================================ dispatch
 
-def load(path: str | Path, *, mapping: Mapping | None = None, params=None) -> Signals:
-    """Read a recording (dispatch by suffix). The result is RAW: run :func:`.cleaning.clean` next."""
+def load(path: str | Path, *, mapping: Mapping | None = None, params=None, joint: str | None = None) -> Signals:
+    """Read a recording (dispatch by suffix). The result is RAW: run :func:`.cleaning.clean` next.
+    ``joint``: which joint of a multi-joint recording of ``actuator_node`` (MCAP)."""
     path = Path(path)
     if not path.exists():
         raise LoadError(f"{path}: no such file")
     suffix = path.suffix.lower()
     if suffix == ".mcap":
-        return load_mcap(path, mapping=mapping, params=params)
+        return load_mcap(path, mapping=mapping, params=params, joint=joint)
+    if joint is not None:
+        raise LoadError(f"{path}: --joint applies to multi-joint MCAP recordings of actuator_node")
     if suffix in (".csv", ".tsv", ".txt"):
         if mapping is None:
             from . import realdata
@@ -810,7 +813,25 @@ def _params_from_flat(flat: dict | None):
 
 
 
-def load_mcap(path: str | Path, mapping: Mapping | None = None, params=None) -> Signals:
+def recorded_joints(metadata: list[tuple[str, dict]]) -> list[str]:
+    """Joint names of a multi-joint recording of ``actuator_node`` (``joints`` in its metadata), else []."""
+    names: list[str] = []
+    for name, rec in metadata:
+        if name == "bldc_actuator" and rec.get("joints") and "," in rec["joints"]:
+            names = rec["joints"].split(",")
+    return names
+
+
+def _joint_parameters(flat: dict | None, joint: str) -> dict | None:
+    """One joint's model parameters from the flat parameters of a multi-joint recording."""
+    if not flat:
+        return None
+    prefix = f"joint.{joint}."
+    mine = {k[len(prefix):]: v for k, v in flat.items() if k.startswith(prefix)}
+    return mine or None
+
+
+def load_mcap(path: str | Path, mapping: Mapping | None = None, params=None, joint: str | None = None) -> Signals:
     """A ROS 2 MCAP recording.
 
     This project's own recordings (``joint_states`` + ``~/q_axis_state`` present) load without a mapping:
@@ -819,7 +840,9 @@ def load_mcap(path: str | Path, mapping: Mapping | None = None, params=None) -> 
     and is multiplied by the gear ratio of the parameters stored in the recording (``--params`` when the
     file has none); temperatures; ``~/torque_command`` and ``~/load_torque`` (held between messages; 0
     before the first one, as in the node). A ``mapping`` adds to / overrides this default. Foreign
-    recordings need a mapping (``topic.field[index]`` per canonical channel).
+    recordings need a mapping (``topic.field[index]`` per canonical channel). A recording of several joints
+    (``actuator_node -p joints:=[...]``) loads one joint: ``joint`` (its ``~/<joint>/...`` topics, its entry of
+    ``joint_states`` and its own parameters); without ``joint`` it is an error naming the joints.
 
     Fields are read straight from the CDR bytes using the file's own message schemas (vectorised when a
     topic's messages share one layout, the usual case; about 1 s for 60 s of the node at 1 kHz). Message
@@ -838,8 +861,18 @@ def load_mcap(path: str | Path, mapping: Mapping | None = None, params=None) -> 
 
     plan: dict[str, tuple[str, str, float, float]] = {}
     notes: list[str] = []
+    q_topics = [t for t in topic_names if t.endswith("/q_axis_state")]
+    joints = sorted(t.rsplit("/", 2)[-2] for t in q_topics) if own and len(q_topics) > 1 else []
+    if joints and joint is None:
+        raise LoadError(f"{path}: a recording of several joints ({', '.join(joints)}): choose one with --joint NAME")
+    if joints and joint not in joints:
+        raise LoadError(f"{path}: no joint {joint!r} in this recording (joints: {', '.join(joints)})")
     if own:
         for target, (suffix, fld) in OWN_TOPICS.items():
+            if joints and suffix != "joint_states":
+                suffix = f"{joint}/{suffix}"
+            elif joints:
+                fld = fld.replace("[0]", f"[{joint}]")
             hits = [t for t in topic_names if t == suffix or t.endswith("/" + suffix)]
             if len(hits) == 1:
                 plan[target] = (hits[0], fld, 1.0, 0.0)
@@ -859,6 +892,9 @@ def load_mcap(path: str | Path, mapping: Mapping | None = None, params=None) -> 
     notes += scan_notes
     by_topic = {ch.topic: ch for ch in channels_by_id.values()}
     rec_params = _recorded_parameters(metadata) if own else None
+    if own and joints:
+        rec_params = _joint_parameters(rec_params, joint)
+        notes.append(f"joint {joint} of a recording of {len(joints)} joints ({', '.join(joints)})")
     params_rec = _params_from_flat(rec_params)
     if own and rec_params is None:
         notes.append("no parameters stored in the recording")
@@ -946,8 +982,10 @@ def load_mcap(path: str | Path, mapping: Mapping | None = None, params=None) -> 
         semantics["current_command"] = "q_axis_state.i_q_ref: current reference after the drive's limits"
         semantics["load_torque"] = "~/load_torque: external load in ADDITION to params.load.* (as set_load_torque)"
         if "position" in semantics:
-            semantics["position"] = f"joint_states.position[0] (output side) x gear ratio {gear:g}"
-    meta = {"format": "mcap", "own_recording": own, "mapping": mapping.describe(), "semantics": semantics,
+            semantics["position"] = (f"joint_states.position[{joint if joints else 0}] (output side) x gear "
+                                     f"ratio {gear:g}")
+    meta = {"format": "mcap", "own_recording": own, "joint": joint if joints else None,
+            "mapping": mapping.describe(), "semantics": semantics,
             "notes": notes, "gear_ratio": gear, "params_from_recording": params_rec,
             "recorded_parameters": rec_params, "time_base": plan[base_target][0], "t0_ns": t0,
             "topics": topic_types, "extraction": how}

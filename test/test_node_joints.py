@@ -1,0 +1,158 @@
+"""Several joints in one actuator_node: each joint is its own actuator (preset, overrides), follows its own
+command, a bad command for one joint leaves the others running, ros2_control's topic_based hardware interface
+can drive it (sensor_msgs/JointState commands by name), and one recording diagnoses per joint."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+pytest.importorskip("rclpy")
+
+from conftest import wait_for  # noqa: E402
+from node_helpers import Probe, make_node, wait_heard  # noqa: E402
+
+from bldc_actuator.params import load_preset  # noqa: E402
+
+T = 10.0
+JOINTS = ["hip", "knee", "ankle"]
+PRESETS = {"hip": "ak80_9", "knee": "odrive_d5065", "ankle": "tmotor_u8"}
+
+
+def _robot(ros_context, ros_executor, **extra):
+    params = {"joints": JOINTS, "node.lock_step": True, "node.watchdog_timeout": 0.0,
+              "joint.ankle.drive.bus_voltage": 36.0, **{f"joint.{j}.preset": p for j, p in PRESETS.items()}}
+    params.update(extra)
+    return make_node(ros_context, ros_executor, params=params)
+
+
+def _send(probe, node, topic, msg, periods_before):
+    probe.publish(topic, msg)
+    assert wait_for(lambda: node.periods > periods_before, T), f"no period after {topic}"
+
+
+def test_three_joints_each_follow_their_own_command(ros_context, ros_executor):
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray
+
+    node = _robot(ros_context, ros_executor)
+    assert [j.name for j in node.joints] == JOINTS
+    for j in node.joints:   # each joint is its own motor (its preset), the override applied to one only
+        want = load_preset(PRESETS[j.name])
+        assert j.params.motor.torque_constant_q == want.motor.torque_constant_q
+        assert j.params.gear.gear_ratio == want.gear.gear_ratio
+    assert node.joints[2].params.drive.bus_voltage == 36.0 != load_preset("tmotor_u8").drive.bus_voltage
+    probe = Probe(ros_context, ros_executor).listen("/joint_states", JointState)
+    probe.connect("/bldc_actuator/commands", Float64MultiArray)
+    wait_heard(node.pub_joint)
+    tau = [0.8, 0.05, -0.4]                                  # effort [N*m] at each output, joints order
+    for _ in range(50):
+        _send(probe, node, "/bldc_actuator/commands", Float64MultiArray(data=tau), node.periods)
+    for j, t in zip(node.joints, tau):
+        p = j.params
+        assert j.command_kind == "torque" and j.command_value == t
+        assert math.isclose(j.actuator.state.i_q_ref, t / (p.motor.torque_constant_q * p.gear.gear_ratio),
+                            rel_tol=1e-12)
+    assert wait_for(lambda: len(probe.get("/joint_states")) >= 40, T)
+    last = probe.get("/joint_states")[-1]
+    assert list(last.name) == JOINTS
+    # effort = K_t i_q N follows each joint's own command (current loop settled after 50 ms)
+    for name, t, e in zip(last.name, tau, last.effort):
+        assert math.isclose(e, t, rel_tol=0.02, abs_tol=1e-3), name
+    # and the three rotors move as three different motors: signs follow the commands
+    assert last.velocity[0] > 0 and last.velocity[2] < 0
+
+
+def test_a_bad_command_for_one_joint_leaves_the_others_running(ros_context, ros_executor):
+    from std_msgs.msg import Float64, Float64MultiArray
+
+    node = _robot(ros_context, ros_executor)
+    probe = Probe(ros_context, ros_executor)
+    probe.connect("/bldc_actuator/commands", Float64MultiArray)
+    probe.connect("/bldc_actuator/knee/torque_command", Float64)
+    _send(probe, node, "/bldc_actuator/commands", Float64MultiArray(data=[0.5, math.nan, -0.2]), node.periods)
+    hip, knee, ankle = node.joints
+    assert hip.command_value == 0.5 and ankle.command_value == -0.2     # applied
+    assert knee.commands_rejected == 1 and hip.commands_rejected == 0
+    assert "knee" in knee.last_rejection and "finite" in knee.last_rejection
+    # per-joint topic: an absurd torque for the knee only; the knee keeps its last good command
+    probe.publish("/bldc_actuator/knee/torque_command", Float64(data=1e6))
+    assert wait_for(lambda: knee.commands_rejected == 2, T)
+    probe.publish("/bldc_actuator/knee/torque_command", Float64(data=0.04))
+    assert wait_for(lambda: knee.command_value == 0.04, T)
+    before = node.periods
+    for _ in range(20):
+        _send(probe, node, "/bldc_actuator/commands", Float64MultiArray(data=[0.5, 0.04, -0.2]), node.periods)
+    assert node.periods == before + 20
+    status = {s.hardware_id: s for s in node.diagnostic_statuses()}
+    assert set(status) == set(JOINTS)
+    assert hip.actuator.state.omega > 0 and ankle.actuator.state.omega < 0
+    # wrong length: rejected for all, still one lock-step period (a waiting controller never stalls)
+    n = node.periods
+    _send(probe, node, "/bldc_actuator/commands", Float64MultiArray(data=[0.1]), n)
+    assert "expected 3 element(s)" in node.last_rejection
+
+
+def test_ros2_control_topic_based_interface_contract(ros_context, ros_executor):
+    """What ros2_control's joint_state_topic_hardware_interface sends: sensor_msgs/JointState on
+    /robot_joint_command with every joint name and ``effort`` for the effort command interfaces, in name
+    order (not necessarily the node's order); it reads /robot_joint_states."""
+    from sensor_msgs.msg import JointState
+
+    node = _robot(ros_context, ros_executor, **{"node.joint_commands_topic": "/robot_joint_command",
+                                                 "node.joint_states_topic": "/robot_joint_states"})
+    assert node.pub_joint.topic_name == "/robot_joint_states"
+    probe = Probe(ros_context, ros_executor).listen("/robot_joint_states", JointState)
+    probe.connect("/robot_joint_command", JointState)
+    cmd = JointState(name=["ankle", "hip", "knee"], effort=[-0.3, 0.6, 0.02])
+    for _ in range(30):
+        _send(probe, node, "/robot_joint_command", cmd, node.periods)
+    by = {j.name: j for j in node.joints}
+    assert by["ankle"].command_value == -0.3 and by["hip"].command_value == 0.6 and by["knee"].command_value == 0.02
+    assert wait_for(lambda: len(probe.get("/robot_joint_states")) > 10, T)
+    # position / velocity command interfaces: a clear rejection, nothing applied
+    _send(probe, node, "/robot_joint_command", JointState(name=["hip"], position=[1.0]), node.periods)
+    assert "position/velocity commands are not supported" in node.last_rejection
+    assert by["hip"].command_value == 0.6
+
+
+def test_one_recording_diagnoses_per_joint(ros_context, ros_executor, tmp_path):
+    from std_msgs.msg import Float64MultiArray
+
+    from bldc_actuator.diagnosis import loaders
+    from bldc_actuator.diagnosis.cli import register  # noqa: F401 - the CLI that takes --joint
+    from bldc_actuator.recording import read_recording
+
+    path = tmp_path / "robot.mcap"
+    node = _robot(ros_context, ros_executor, **{"node.record": str(path)})
+    for k in range(400):   # a different torque pattern per joint
+        t = k * 1e-3
+        msg = Float64MultiArray(data=[0.6 * math.sin(2 * math.pi * 3 * t), 0.05 * math.sin(2 * math.pi * 5 * t),
+                                      0.3 * math.cos(2 * math.pi * 2 * t)])
+        node._on_commands(msg)  # noqa: SLF001 - lock-step: one period per command, same path as a message
+    node.close()
+    rec = read_recording(path)
+    assert rec.finalized
+    for j in JOINTS:
+        assert len(rec.topics[f"/bldc_actuator/{j}/q_axis_state"]) == node.periods + 1
+    with pytest.raises(ValueError, match="several joints.*--joint"):
+        loaders.load(path)
+    for j in node.joints:
+        sig = loaders.load(path, joint=j.name)
+        p = sig.meta["params_from_recording"]
+        assert p.motor.torque_constant_q == j.params.motor.torque_constant_q
+        assert p.drive.bus_voltage == j.params.drive.bus_voltage
+        # the joint's own current and motor-side angle (output angle x ITS gear ratio)
+        assert abs(sig.channels["current"][-1] - j.actuator.state.i_q) < 1e-9
+        assert abs(sig.channels["position"][-1] - j.actuator.state.theta) < 1e-6 * max(1.0, abs(j.actuator.state.theta))
+    # the diagnose command runs on one joint with the parameters stored for it
+    from bldc_actuator import cli
+
+    out = tmp_path / "knee.json"
+    assert cli.main(["diagnose", str(path), "--joint", "knee", "--params", "recording", "--json", str(out),
+                     "--quiet"]) == 0
+    report = json.loads(out.read_text())
+    # the knee's own stored parameters are the truth of that joint: nothing is missing
+    assert report["nothing_missing"] is True and not report["findings"]
