@@ -46,15 +46,71 @@ def pct(xs, q):
     return float(np.percentile(np.asarray(xs), q)) if len(xs) else float("nan")
 
 
-def run_free(context, executor_kind: str, seconds: float, time_factor: float, record: Path | None) -> dict:
+CONTROLLER = """
+import os, sys, time, rclpy
+from rclpy.node import Node
+from std_msgs.msg import Float64MultiArray
+n, rate, seconds = int(sys.argv[1]), float(sys.argv[2]), float(sys.argv[3])
+rclpy.init()
+node = Node("bench_controller_process")
+pub = node.create_publisher(Float64MultiArray, "/bldc_actuator/commands", 10)
+msg = Float64MultiArray(data=[0.5] * n)
+k = [0]
+def send():
+    k[0] += 1
+    msg.data = [0.5 if (k[0] // 250) % 2 else -0.5] * n
+    pub.publish(msg)
+node.create_timer(1.0 / rate, send)
+end = time.monotonic() + seconds
+while time.monotonic() < end and rclpy.ok():
+    rclpy.spin_once(node, timeout_sec=0.1)
+"""
+
+
+def start_controller(joints: int, rate: float, seconds: float):
+    """A controller in ANOTHER process sending ~/commands (one effort per joint) at ``rate`` Hz."""
+    import subprocess
+
+    env = dict(os.environ)
+    env.pop("_ROS_WHEELS_BOOTSTRAP_COMPLETE", None)
+    return subprocess.Popen([sys.executable, "-c", CONTROLLER, str(joints), str(rate), str(seconds)], env=env)
+
+
+def proc_cpu_seconds() -> float:
+    """utime + stime of this process from /proc (all threads: executor, DDS)."""
+    fields = Path("/proc/self/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def joint_overrides(joints: int, detail_rate: float):
+    from rclpy.parameter import Parameter
+
+    if joints <= 1:
+        return []
+    names = [f"j{k}" for k in range(joints)]
+    return ([Parameter("joints", value=names), Parameter("node.detail_rate", value=detail_rate)]
+            + [Parameter(f"joint.{n}.preset", value="ak80_9") for n in names])
+
+
+def run_free(context, executor_kind: str, seconds: float, time_factor: float, record: Path | None,
+             joints: int = 1, detail_rate: float = 0.0, controller_rate: float = 0.0) -> dict:
     from rclpy.parameter import Parameter
 
     from bldc_actuator.node import ActuatorNode
 
-    overrides = [Parameter("node.time_factor", value=time_factor)]
+    overrides = [Parameter("node.time_factor", value=time_factor)] + joint_overrides(joints, detail_rate)
     if record is not None:
         overrides.append(Parameter("node.record", value=str(record)))
     node = ActuatorNode(context=context, parameter_overrides=overrides, start=False)
+    ctl = None
+    if controller_rate > 0:
+        ctl = start_controller(len(node.joints), controller_rate, seconds + 30.0)
+        t0 = time.monotonic()
+        while node.sub_commands.get_publisher_count() == 0:
+            time.sleep(0.05)
+            if time.monotonic() - t0 > 20:
+                ctl.kill()
+                raise RuntimeError("controller process not discovered")
     ticks: list[int] = []
     pubs: list[int] = []
     orig_tick, orig_pub = node._on_tick, node._publish_state
@@ -73,13 +129,18 @@ def run_free(context, executor_kind: str, seconds: float, time_factor: float, re
     ex.add_node(node)
     node.start()
     pubs.clear()
-    wall0, cpu0, sim0 = time.monotonic_ns(), time.process_time(), node.t_ns
+    received0 = node.commands_received
+    wall0, cpu0, sim0 = time.monotonic_ns(), proc_cpu_seconds(), node.t_ns
     anchor_wall, anchor_sim = node._anchor_wall, node._anchor_sim
     deadline = time.monotonic() + seconds
     while time.monotonic() < deadline:
         ex.spin_once(timeout_sec=0.05)
     wall = (time.monotonic_ns() - wall0) * 1e-9
-    cpu = time.process_time() - cpu0
+    cpu = proc_cpu_seconds() - cpu0
+    received = node.commands_received - received0
+    if ctl is not None:
+        ctl.kill()
+        ctl.wait()
     sim = (node.t_ns - sim0) * 1e-9
     rec = node.recorder
     written = rec.messages_written if rec is not None else 0
@@ -90,7 +151,8 @@ def run_free(context, executor_kind: str, seconds: float, time_factor: float, re
     node.destroy_node()
     ex.shutdown()
     out = {"wall": wall, "sim": sim, "rtf": sim / wall, "cpu": cpu / wall, "periods": len(pubs),
-           "rate": len(pubs) / wall, "messages": written, "bytes": nbytes, "slips": slips}
+           "rate": len(pubs) / wall, "messages": written, "bytes": nbytes, "slips": slips,
+           "commands_per_s": received / wall / max(1, joints)}
     if 0 < time_factor < float("inf"):
         intervals = np.diff(ticks) * 1e-6
         period_ns = node.period_ns
@@ -158,10 +220,36 @@ def physics_alone(seconds: float = 1.0) -> float:
     return n * 1e-3 / (time.perf_counter() - t0)
 
 
+def robot_figures(context, kinds, args) -> None:
+    """Issue #8's figures: N joints at 1 kHz publish / 10 kHz physics in real time with commands from another
+    process (500 Hz); as fast as possible for N joints and for one; lock-step for one joint."""
+    n = args.robot
+    for kind in kinds:
+        print(f"\n[robot, {kind} executor]")
+        r = run_free(context, kind, args.seconds, 1.0, None, joints=n, detail_rate=args.detail_rate,
+                     controller_rate=500.0)
+        print(f"  {n} joints real time, controller process 500 Hz: rate {r['rate']:7.1f} Hz   publish lateness "
+              f"p50/p99/max {r['late_p50']:.3f}/{r['late_p99']:.3f}/{r['late_max']:.2f} ms   node CPU "
+              f"{r['cpu'] * 100:5.1f} % of one core (/proc)   commands {r['commands_per_s']:.0f}/s per joint   "
+              f"slips {r['slips']}   detail topics {args.detail_rate:g} Hz")
+        r = run_free(context, kind, args.seconds, 0.0, None, joints=n, detail_rate=args.detail_rate)
+        print(f"  {n} joints as fast as possible: {r['rtf']:6.2f}x real time (CPU {r['cpu'] * 100:5.1f} %)")
+        r = run_free(context, kind, args.seconds, 0.0, None)
+        print(f"  1 joint as fast as possible:   {r['rtf']:6.2f}x real time (CPU {r['cpu'] * 100:5.1f} %)")
+        r = run_lock_step(context, kind, args.seconds)
+        print(f"  1 joint lock-step, in-process controller: {r['rtf']:.2f}x real time "
+              f"({r['periods_per_s']:.0f} round trips/s)")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seconds", type=float, default=3.0, help="wall seconds per measurement")
     ap.add_argument("--executor", choices=("single", "events", "both"), default="both")
+    ap.add_argument("--robot", type=int, default=12, metavar="N",
+                    help="also the whole-robot figures for N joints (ak80_9 each; 0 skips)")
+    ap.add_argument("--detail-rate", type=float, default=100.0,
+                    help="per-joint detail topics rate for the robot figures [Hz]")
+    ap.add_argument("--only-robot", action="store_true", help="only the whole-robot figures")
     args = ap.parse_args()
     import rclpy
     from rclpy.context import Context
@@ -181,7 +269,9 @@ def main() -> int:
     print(f"physics alone (Actuator.step_ns, 1 ms periods): {physics_alone():.1f}x real time")
     tmp = Path(tempfile.mkdtemp(prefix="bench_node_"))
     try:
-        for kind in kinds:
+        if args.robot:
+            robot_figures(context, kinds, args)
+        for kind in ([] if args.only_robot else kinds):
             print(f"\n[{kind} executor]")
             for label, rec in (("real time (factor 1)", None),
                                ("real time, recording MCAP", tmp / f"rt_{kind}.mcap")):

@@ -303,6 +303,9 @@ class _Base:
 
     def _view(self) -> SimpleNamespace:
         """The state as attributes (arrays for a batch, scalars for one actuator)."""
+        if not self._batch:
+            values = self._ss[0].item() if self._rs is None else [getattr(self._rs[0], n) for n in STATE_DTYPE.names]
+            return SimpleNamespace(**dict(zip(STATE_DTYPE.names, values)))
         return SimpleNamespace(**{name: self._get(name) for name in STATE_DTYPE.names})
 
     def step(self, dt: float) -> None:

@@ -719,17 +719,23 @@ class ActuatorNode(Node):
 USAGE = """\
 usage: actuator_node [--record PATH] [--executor events|single] [--ros-args --params-file FILE -p name:=value ...]
 
-Virtual BLDC actuator node (bldc_actuator). Every model parameter has a default: it runs without a
-parameter file. --record PATH records commands, outputs and parameters to an MCAP file (same as
--p node.record:=PATH). --executor: single (SingleThreadedExecutor, default) or events (rclpy's
-experimental EventsExecutor, Kilted+: less CPU, faster lock-step). Stops on Ctrl-C / SIGTERM, or after
-node.max_sim_time seconds of simulation.
+Virtual BLDC actuator node (bldc_actuator): one joint, or a whole robot with -p joints:="[hip, knee, ankle]".
+Every model parameter has a default: it runs without a parameter file. --record PATH records commands,
+outputs and parameters to an MCAP file (same as -p node.record:=PATH). --executor: events (rclpy's
+EventsExecutor, the default where it exists: less CPU, faster lock-step) or single (SingleThreadedExecutor).
+Stops on Ctrl-C / SIGTERM, or after node.max_sim_time seconds of simulation.
 
-Topics (relative to the namespace; ~ = the node's private namespace):
-  in : ~/current_command, ~/torque_command (std_msgs/Float64), ~/commands (std_msgs/Float64MultiArray),
-       ~/load_torque (std_msgs/Float64), ~/reset_fault (std_msgs/Empty)
-  out: joint_states, ~/phase_currents, ~/q_axis_state, ~/winding_temperature, ~/housing_temperature,
-       /diagnostics, /clock (node.publish_clock)
+Topics (relative to the namespace; ~ = the node's private namespace; with joints given, the per-joint topics
+are ~/<joint>/...):
+  in : ~/current_command, ~/torque_command (std_msgs/Float64, per joint), ~/commands
+       (std_msgs/Float64MultiArray, one value per joint in joints order), ~/load_torque (std_msgs/Float64,
+       per joint), ~/reset_fault (std_msgs/Empty, per joint), node.joint_commands_topic (sensor_msgs/JointState
+       effort by joint name: ros2_control's topic_based hardware interface)
+  out: node.joint_states_topic (joint_states: every joint), ~/phase_currents, ~/q_axis_state,
+       ~/winding_temperature, ~/housing_temperature (per joint, at node.detail_rate), /diagnostics (one status
+       per joint), /clock (node.publish_clock)
+
+Per-joint parameters: joint.<name>.preset, joint.<name>.params_file, joint.<name>.<model parameter>.
 
 Parameters:
 """
@@ -779,9 +785,11 @@ OWN_FLAGS = {"--record": "PATH", "--executor": "events|single"}
 
 
 def make_executor(kind: str | None = None, context=None):
-    """``single`` (SingleThreadedExecutor, the default) or ``events`` (rclpy.experimental.EventsExecutor,
-    ROS 2 Kilted+: about 35 % less CPU at 1 kHz and 4x faster lock-step round trips; experimental)."""
-    if kind == "events":
+    """``events`` (rclpy.experimental.EventsExecutor, ROS 2 Kilted+; the default where it exists) or
+    ``single`` (SingleThreadedExecutor; the default on older ROS 2). Measured (benchmarks/bench_node.py,
+    12 joints at 1 kHz): events keeps 1000 Hz at about half the CPU of single, which cannot keep up, and makes
+    lock-step round trips about 5x faster."""
+    if kind in (None, "events"):
         try:
             from rclpy.experimental import EventsExecutor
 
