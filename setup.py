@@ -25,6 +25,9 @@ SIM = [
     "mcap>=1.2",
     "mcap-ros2-support>=0.5",
     "matplotlib>=3.6",
+    "dask[distributed]>=2023.1",
+    "pyarrow>=12",
+    "tqdm>=4.60",
 ]
 # rclpy and the message packages as PyPI wheels (ROS 2 Kilted builds); for a venv without a ROS install.
 ROS_WHEELS = [
