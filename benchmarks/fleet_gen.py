@@ -70,6 +70,8 @@ def nominal_params() -> ActuatorParams:
     """The fleet's datasheet parameters: a small geared joint (9:1) with a light, fast thermal network."""
     return ActuatorParams().replace(**{
         "gear.gear_ratio": 9.0,
+        "drive.current_loop_rate": 4000.0,
+        "drive.current_loop_bandwidth": 500.0,
         "motor.phase_resistance": 0.5,
         "motor.rotor_inertia": 2.0e-3,
         "motor.viscous_damping": 2.0e-4,
@@ -97,8 +99,10 @@ def _stable(text: str) -> int:
     return zlib.crc32(text.encode())
 
 
-def true_params(nominal: ActuatorParams, unit: Unit, day: int, days: int, rng: np.random.Generator) -> ActuatorParams:
-    """The actuator's true parameters on ``day`` (0-based): unit-to-unit spread (1 %) plus the planted drift."""
+def true_params(nominal: ActuatorParams, unit: Unit, day: int, days: int, rng: np.random.Generator,
+                drift_days: float = 30.0) -> ActuatorParams:
+    """The actuator's true parameters on ``day`` (0-based): unit-to-unit spread (1 %) plus the planted drift
+    (full size after ``drift_days`` days: +40 % friction, +30 % R_ha; the K_t step at ``days // 2``)."""
     f = nominal.to_flat()
     spread = np.random.default_rng(_stable(unit.actuator_id)).normal(0.0, 0.01, 4)
     coulomb = f["effects.coulomb_friction"] * (1 + spread[0])
@@ -106,9 +110,9 @@ def true_params(nominal: ActuatorParams, unit: Unit, day: int, days: int, rng: n
     kt = f["motor.torque_constant_q"] * (1 + 0.3 * spread[2])
     visc = f["motor.viscous_damping"] * (1 + spread[3])
     if unit.drift == "friction":
-        coulomb *= 1 + 0.40 * day / 30.0
+        coulomb *= 1 + 0.40 * day / drift_days
     elif unit.drift == "r_ha":
-        r_ha *= 1 + 0.30 * day / 30.0
+        r_ha *= 1 + 0.30 * day / drift_days
     elif unit.drift == "kt_step" and day >= days // 2:
         kt *= 0.95
     warm = 12.0 + 6.0 * rng.random()
@@ -250,14 +254,16 @@ def default_units(n_actuators: int) -> list[Unit]:
 
 
 def generate(root: str | Path, n_actuators: int = 8, days: int = 30, duration: float = 20.0, rate: float = 250.0,
-             seed: int = 1, corrupt: int = 0, progress: bool = False) -> dict:
+             seed: int = 1, corrupt: int = 0, progress: bool = False, drift_days: float = 30.0,
+             units: list[Unit] | None = None, formats: tuple[str, ...] = FORMATS) -> dict:
     """Write the fleet under ``root``; returns the truth (also written to ``root/truth.json``).
-    ``corrupt`` > 0 adds that many corrupt files (truncated MCAP / garbage CSV) that a run must report."""
+    ``corrupt`` > 0 adds that many corrupt files (truncated MCAP / garbage CSV) that a run must report;
+    ``units`` replaces :func:`default_units`; ``formats`` keeps only the units logging in those formats."""
     root = Path(root)
     root.mkdir(parents=True, exist_ok=True)
     nominal = nominal_params()
     (root / "params.yaml").write_text(dump_yaml(nominal))
-    units = default_units(n_actuators)
+    units = [u for u in (units or default_units(n_actuators)) if u.fmt in formats]
     files: list[str] = []
     for day in range(days):
         start = START + dt.timedelta(days=day)
@@ -265,7 +271,7 @@ def generate(root: str | Path, n_actuators: int = 8, days: int = 30, duration: f
         wide = []
         for u in units:
             rng = np.random.default_rng([seed, day, _stable(u.actuator_id)])
-            sig = simulate(true_params(nominal, u, day, days, rng), duration, rate, rng)
+            sig = simulate(true_params(nominal, u, day, days, rng, drift_days), duration, rate, rng)
             if u.fmt == "mcap":
                 f = root / u.actuator_id / f"{stamp}.mcap"
                 write_mcap(f, sig, nominal, u.actuator_id, start)
@@ -295,6 +301,7 @@ def generate(root: str | Path, n_actuators: int = 8, days: int = 30, duration: f
             f.write_text("t,q_out,dq_out,iq\n1,2,x\n")
         files.append(str(f))
     truth = {"start": START.isoformat(), "days": days, "duration_s": duration, "rate_hz": rate,
+             "drift_days": drift_days,
              "actuators": [{"actuator_id": u.actuator_id, "format": u.fmt, "drift": u.drift,
                             "parameter": DRIFT_PARAMETER.get(u.drift) if u.drift else None} for u in units],
              "files": len(files)}
@@ -310,9 +317,12 @@ def main(argv=None) -> int:
     ap.add_argument("--duration", type=float, default=20.0, help="[s] per recording")
     ap.add_argument("--rate", type=float, default=250.0, help="[Hz] sample rate")
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--drift-days", type=float, default=30.0, help="days over which the drifts reach full size")
+    ap.add_argument("--formats", default=",".join(FORMATS), help="comma-separated subset of " + ", ".join(FORMATS))
     ap.add_argument("--corrupt", type=int, default=0, help="add this many corrupt files")
     a = ap.parse_args(argv)
-    truth = generate(a.out, a.actuators, a.days, a.duration, a.rate, a.seed, a.corrupt, progress=True)
+    truth = generate(a.out, a.actuators, a.days, a.duration, a.rate, a.seed, a.corrupt, progress=True,
+                     drift_days=a.drift_days, formats=tuple(a.formats.split(",")))
     print(f"wrote {truth['files']} files under {a.out} ({a.actuators} actuators x {a.days} days)")
     return 0
 

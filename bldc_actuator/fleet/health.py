@@ -35,7 +35,8 @@ Estimator (well defined, the same for every recording):
    tracked parameters fitted and this one at nominal (before) vs all fitted (after).
 5. R_ha: 1-parameter nonlinear least squares of ``log(R_ha/R_ha,nom)`` on the training part of the
    recorded temperatures simulated from the measured current (starting at the first recorded
-   temperatures); uncertainty from the Jacobian, inflated by the residual's correlation time; held-out =
+   temperatures; when only one of winding / housing is recorded, the other node's start temperature is
+   fitted too, as a nuisance); uncertainty from the Jacobian, inflated by the residual's correlation time; held-out =
    temperature RMS on the held-out blocks. Assumes the nominal ambient temperature (``thermal.
    ambient_temperature``) and the other thermal parameters; a warm actuator cooling (or heating) during the
    recording makes it identifiable.
@@ -181,32 +182,43 @@ def _track_r_ha(ctx, params: ActuatorParams, ee) -> Tracked:
     span = max(float(np.ptp(ctx.raw[c][ctx.valid[c]])) if ctx.valid[c].any() else 0.0 for c in temps)
     if span < 1.0:
         return _not_checkable(parameter, params, f"the recorded temperature changes by {span:.2f} K (< 1 K)")
-    every = max(1, int(ctx.fs / 2.0))
+    every = max(1, int(ctx.fs / 10.0))
     idx = np.arange(0, len(ctx.t), every)
     a0 = ctx.segments[0][0]
     T0w = ctx.raw.get("winding_temperature", ctx.raw.get("housing_temperature"))[a0]
     T0h = ctx.raw.get("housing_temperature", ctx.raw.get("winding_temperature"))[a0]
     R0 = params.thermal.housing_to_ambient_resistance
     ho = np.concatenate([ctx.holdout_raw[idx]] * len(temps))
+    # the node that is not recorded starts at an unknown temperature: a nuisance offset fitted with R_ha
+    free_T0 = len(temps) == 1
 
-    def resid(x: float) -> np.ndarray:
-        p = params.replace(**{"thermal.housing_to_ambient_resistance": R0 * math.exp(x)})
-        T_w, T_h = ee.thermal_response(ctx, p, T0=(T0w, T0h), every=every)
+    def resid(x) -> np.ndarray:
+        p = params.replace(**{"thermal.housing_to_ambient_resistance": R0 * math.exp(x[0])})
+        d = x[1] if free_T0 else 0.0
+        T0 = (T0w + d, T0h) if temps == ["housing_temperature"] else (T0w, T0h + d)
+        T_w, T_h = ee.thermal_response(ctx, p, T0=T0, every=every)
         sims = {"winding_temperature": T_w, "housing_temperature": T_h}
         return np.concatenate([np.where(ctx.valid[c][idx], sims[c][idx] - ctx.raw[c][idx], np.nan) for c in temps])
 
     def train(x):
-        r = resid(float(x[0]))
-        return np.nan_to_num(r[~ho])
+        return np.nan_to_num(resid(x)[~ho])
 
-    r0 = resid(0.0)
-    sol = least_squares(train, np.zeros(1), bounds=(-math.log(10), math.log(10)), x_scale=0.3, max_nfev=30)
-    r1 = resid(float(sol.x[0]))
+    x0 = np.zeros(2 if free_T0 else 1)
+    lim = math.log(10)
+    lo = np.array([-lim, -30.0])[: len(x0)]
+    hi = np.array([lim, 30.0])[: len(x0)]
+    r0 = resid(x0)
+    if free_T0:    # nominal "before": the best start temperature with the nominal R_ha
+        s0 = least_squares(lambda d: train(np.array([0.0, d[0]])), np.zeros(1), bounds=(-30.0, 30.0), max_nfev=30)
+        r0 = resid(np.array([0.0, s0.x[0]]))
+    sol = least_squares(train, x0, bounds=(lo, hi), x_scale=np.array([0.3, 1.0])[: len(x0)], max_nfev=60)
+    r1 = resid(sol.x)
     rt = r1[~ho & np.isfinite(r1)]
-    s2 = float(rt @ rt) / max(1, len(rt) - 1)
+    s2 = float(rt @ rt) / max(1, len(rt) - len(x0))
     J = sol.jac
     tau = ee.integrated_autocorrelation_time(rt) if len(rt) > 8 else 1.0
     var_x = float(np.linalg.pinv(J.T @ J)[0, 0]) * s2 * tau
     value = R0 * math.exp(float(sol.x[0]))
+    note = "; the unrecorded node's start temperature fitted as a nuisance" if free_T0 else ""
     return Tracked(parameter, "thermal_parameters", "K/W", value, value * math.sqrt(max(var_x, 0.0)), R0,
-                   _rms(r0[ho]), _rms(r1[ho]), "held-out temperature RMS [K] (" + ", ".join(temps) + ")")
+                   _rms(r0[ho]), _rms(r1[ho]), "held-out temperature RMS [K] (" + ", ".join(temps) + ")" + note)

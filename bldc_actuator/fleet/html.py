@@ -46,7 +46,7 @@ def actuator_figure(aid: str, rows: list[dict], tested: dict[str, dict]):
             ax.axhline(float(rs[0]["nominal"]), color="0.5", ls=":", lw=1, label="nominal")
         if res.get("tested"):
             mb = res["baseline_median"]
-            half = res["z_critical"] * math.hypot(res["baseline_scatter"], res["median_uncertainty"]) * \
+            half = res["z_critical"] * math.hypot(res["scatter"], res["median_uncertainty"]) * \
                 math.sqrt(math.pi / 2) * math.sqrt(1 / res["n_baseline"] + 1 / res["n_recent"])
             ax.axhline(mb, color="tab:green", lw=1, label="baseline median")
             ax.axhspan(mb - half, mb + half, color="tab:green", alpha=0.12, label="no-alert band (recent median)")

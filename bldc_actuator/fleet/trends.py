@@ -4,16 +4,18 @@ Test, per (actuator, parameter) series of tracked values ordered by start time (
 
 * baseline = the first ``max(min_baseline, n/3)`` recordings, recent = the last ``max(min_recent, n/3)``
   (they do not overlap; series shorter than ``min_baseline + min_recent`` are not tested);
-* scatter ``s = sqrt(s_MAD^2 + u_med^2)`` with ``s_MAD = 1.4826 * MAD(baseline)`` (the actuator's own
-  day-to-day scatter, robust to outliers) and ``u_med`` the median per-recording fit uncertainty (so a
-  series whose values happen to agree better than the fits can tell is not over-trusted);
+* scatter ``s = sqrt(s_d^2 + u_med^2)`` with ``s_d = 1.4826 * MAD(diff(values)) / sqrt(2)``: the actuator's
+  own recording-to-recording scatter from the differences of consecutive values of the WHOLE series (a
+  drift only shifts their median, a step spoils one of them; n - 1 differences estimate the scatter far
+  better than a MAD of the few baseline points), and ``u_med`` the median per-recording fit uncertainty
+  (so a series whose values happen to agree better than the fits can tell is not over-trusted);
 * robust z-score of the shift of the median: ``z = (median(recent) - median(baseline)) /
   (s * sqrt(pi/2) * sqrt(1/n_b + 1/n_r))`` (sqrt(pi/2): efficiency of the median under Gaussian scatter);
-* alert when ``|z| > z_crit(n_b, n_r, alpha)`` AND ``|relative change| >= min_change``. ``z_crit`` is
+* alert when ``|z| > z_crit(n, n_b, n_r, alpha)`` AND ``|relative change| >= min_change``. ``z_crit`` is
   calibrated by Monte Carlo of this very statistic on i.i.d. Gaussian series of the same lengths
   (:func:`critical_z`, 20 000 draws, fixed seed) so that the FALSE-ALARM RATE per series is ``alpha``
-  (default 0.001) when the actuator is stable; Student-like tails from a MAD estimated on few points are
-  thereby accounted for;
+  (default 0.001) when the actuator is stable (the heavy tails of a scatter estimated from few points
+  are thereby accounted for);
 * each alert also gives the Theil-Sen slope over the whole series (per 30 days, with its 95 % interval,
   ``scipy.stats.theilslopes``) to tell a drift from a step.
 """
@@ -35,9 +37,16 @@ def _mad_sigma(x: np.ndarray) -> float:
     return 1.4826 * float(np.median(np.abs(x - np.median(x)))) if len(x) else float("nan")
 
 
-def statistic(base: np.ndarray, recent: np.ndarray, u_med: float = 0.0) -> float:
-    """The robust z-score of the module docstring (``nan`` when the scatter is 0 and nothing moved)."""
-    s = math.hypot(_mad_sigma(base), u_med if math.isfinite(u_med) else 0.0)
+def scatter(values: np.ndarray) -> float:
+    """Recording-to-recording scatter from consecutive differences (robust to drifts and steps)."""
+    d = np.diff(values)
+    return _mad_sigma(d) / math.sqrt(2.0) if len(d) else float("nan")
+
+
+def statistic(values: np.ndarray, n_base: int, n_recent: int, u_med: float = 0.0) -> float:
+    """The robust z-score of the module docstring for time-ordered ``values``."""
+    base, recent = values[:n_base], values[len(values) - n_recent:]
+    s = math.hypot(scatter(values), u_med if math.isfinite(u_med) else 0.0)
     d = float(np.median(recent) - np.median(base))
     se = s * math.sqrt(math.pi / 2.0) * math.sqrt(1.0 / len(base) + 1.0 / len(recent))
     if se <= 0:
@@ -46,14 +55,15 @@ def statistic(base: np.ndarray, recent: np.ndarray, u_med: float = 0.0) -> float
 
 
 @lru_cache(maxsize=256)
-def critical_z(n_base: int, n_recent: int, alpha: float = DEFAULT_ALPHA, draws: int = 20000) -> float:
+def critical_z(n: int, n_base: int, n_recent: int, alpha: float = DEFAULT_ALPHA, draws: int = 20000) -> float:
     """|z| exceeded with probability ``alpha`` by a stable series (i.i.d. Gaussian) of these lengths."""
     rng = np.random.default_rng(12345)
-    b = rng.normal(size=(draws, n_base))
-    r = rng.normal(size=(draws, n_recent))
-    mb = np.median(b, axis=1)
-    s = 1.4826 * np.median(np.abs(b - mb[:, None]), axis=1)
-    z = (np.median(r, axis=1) - mb) / (s * math.sqrt(math.pi / 2.0) * math.sqrt(1.0 / n_base + 1.0 / n_recent))
+    x = rng.normal(size=(draws, n))
+    d = np.diff(x, axis=1)
+    s = 1.4826 * np.median(np.abs(d - np.median(d, axis=1)[:, None]), axis=1) / math.sqrt(2.0)
+    mb = np.median(x[:, :n_base], axis=1)
+    mr = np.median(x[:, n - n_recent:], axis=1)
+    z = (mr - mb) / (s * math.sqrt(math.pi / 2.0) * math.sqrt(1.0 / n_base + 1.0 / n_recent))
     return float(np.quantile(np.abs(z), 1.0 - alpha))
 
 
@@ -82,13 +92,13 @@ def test_series(times: np.ndarray, values: np.ndarray, unc: np.ndarray, *, alpha
     base, recent = v[:nb], v[-nr:]
     uu = u[np.isfinite(u)]
     u_med = float(np.median(uu)) if len(uu) else 0.0
-    z = statistic(base, recent, u_med)
-    zc = critical_z(nb, nr, alpha)
+    z = statistic(v, nb, nr, u_med)
+    zc = critical_z(len(v), nb, nr, alpha)
     mb, mr = float(np.median(base)), float(np.median(recent))
     rel = (mr - mb) / abs(mb) if mb else float("nan")
     out = {"tested": True, "n": int(len(v)), "n_baseline": nb, "n_recent": nr, "baseline_median": mb,
            "recent_median": mr, "change": mr - mb, "relative_change": rel,
-           "baseline_scatter": _mad_sigma(base), "median_uncertainty": u_med, "z": z, "z_critical": zc,
+           "scatter": scatter(v), "median_uncertainty": u_med, "z": z, "z_critical": zc,
            "alpha": alpha}
     out["alert"] = bool(abs(z) > zc and (not min_change or (math.isfinite(rel) and abs(rel) >= min_change)))
     if len(v) >= 3 and np.ptp(t) > 0:
