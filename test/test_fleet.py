@@ -214,3 +214,50 @@ def test_distributed_scheduler_with_two_workers(small_fleet, local_run, tmp_path
     assert all(dist[k] == pytest.approx(local[k], rel=1e-9, abs=1e-15) for k in dist)
     assert {(a["actuator_id"], a["parameter"]) for a in doc["alerts"]} == \
         {(a["actuator_id"], a["parameter"]) for a in json.loads((local_run / "alerts.json").read_text())["alerts"]}
+
+
+# ------------------------------------------------------------------------------ ids, times, params map
+
+def test_actuator_id_start_time_and_params_map(tmp_path):
+    import datetime as dt
+
+    from bldc_actuator.fleet import discover, source
+
+    class S:      # a loader result without profile fields
+        meta: dict = {}
+
+    f = tmp_path / "robot7" / "knee" / "2026-03-04_10-20-30.csv"
+    f.parent.mkdir(parents=True)
+    f.write_text("t\n0\n")
+    items = discover.expand([str(tmp_path / "**" / "*.csv")])
+    assert [i.path for i in items] == [str(f.resolve())] and items[0].root == str(tmp_path.resolve())
+    assert source.actuator_id(S(), f, tmp_path) == "robot7/knee"
+    assert source.actuator_id(S(), f, tmp_path, joint="3") == "robot7/knee/3"
+    assert source.start_time(S(), f) == (dt.datetime(2026, 3, 4, 10, 20, 30, tzinfo=dt.timezone.utc),
+                                         "file name (date)")
+    g = tmp_path / "Measuring_efficiency_0_A_antagonist1666994786.4496078.csv"
+    g.write_text("t\n0\n")
+    when, src = source.start_time(S(), g)
+    assert src == "file name (Unix time)" and when.timestamp() == pytest.approx(1666994786.4496078)
+    h = tmp_path / "log.csv"
+    h.write_text("t\n0\n")
+    os.utime(h, (1_700_000_000, 1_700_000_000))
+    assert source.start_time(S(), h) == (dt.datetime.fromtimestamp(1_700_000_000, dt.timezone.utc),
+                                         "file modification time")
+
+    class R(S):   # a profile / metadata that knows better
+        actuator_id = "left_arm/elbow"
+        start_time = "2025-12-31T23:00:00+00:00"
+        start_time_source = "recording metadata"
+    assert source.actuator_id(R(), f, tmp_path) == "left_arm/elbow"
+    assert source.start_time(R(), f)[1] == "recording metadata"
+    (tmp_path / "a.yaml").write_text("x: 1\n")
+    m = tmp_path / "map.yaml"
+    m.write_text("'robot7/*': a.yaml\n'*': a.yaml\n")
+    pm = discover.load_params_map(m)
+    assert discover.params_for(pm, "robot7/knee", str(f)) == str(tmp_path / "a.yaml")
+    m.write_text("'robot7/*': missing.yaml\n")
+    with pytest.raises(ValueError, match="does not exist"):
+        discover.load_params_map(m)
+    with pytest.raises(ValueError, match="no file matches"):
+        discover.expand([str(tmp_path / "**" / "*.mcap")])

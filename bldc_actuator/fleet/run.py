@@ -22,6 +22,7 @@ import os
 import sys
 import time
 import traceback
+import uuid
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -199,7 +200,8 @@ def run(jobs: list[Job], *, scheduler: str | None = None, workers: int | None = 
     try:
         n_workers = len(client.scheduler_info().get("workers", {}))
         where = scheduler or getattr(client.scheduler, "address", "local")
-        futures = client.map(process_file, jobs, pure=False, key=[f"fleet-{i}" for i in range(len(jobs))])
+        tag = uuid.uuid4().hex[:8]
+        futures = client.map(process_file, jobs, pure=False, key=[f"fleet-{tag}-{i}" for i in range(len(jobs))])
         index = {f.key: j for f, j in zip(futures, jobs)}
         bar = _bar(len(jobs), progress)
         rows, failures, joints = [], [], 0

@@ -107,7 +107,10 @@ def test_series(times: np.ndarray, values: np.ndarray, unc: np.ndarray, *, alpha
         slope, _, lo, hi = theilslopes(v, t, alpha=0.95)
         out.update(slope_per_30d=30.0 * slope, slope_low_per_30d=30.0 * lo, slope_high_per_30d=30.0 * hi)
         # a step looks like a flat start and a flat end; a drift keeps moving within both
-        out["shape"] = "drift" if (lo > 0 or hi < 0) and _within_trend(t, v, nb, nr) else "step or shift"
+        if not out["alert"]:
+            out["shape"] = "no alert"
+        else:
+            out["shape"] = "drift" if (lo > 0 or hi < 0) and _within_trend(t, v, nb, nr) else "step or shift"
     return out
 
 
