@@ -261,3 +261,14 @@ def test_actuator_id_start_time_and_params_map(tmp_path):
         discover.load_params_map(m)
     with pytest.raises(ValueError, match="no file matches"):
         discover.expand([str(tmp_path / "**" / "*.mcap")])
+
+
+def test_simulation_clock_is_not_a_date(tmp_path):
+    from bldc_actuator.fleet import source
+
+    class Sim:    # the node records simulation time from 0
+        start_time = 0.0
+        start_time_source = "recording clock"
+    f = tmp_path / "2026-02-03.mcap"
+    f.write_bytes(b"")
+    assert source.start_time(Sim(), f)[1] == "file name (date)"

@@ -9,7 +9,7 @@ actuator id   ``Signals.actuator_id`` (a profile field or the recording's metada
               the search root without the file name (``robot7/knee/2026-01-02.mcap`` -> ``robot7/knee``)
               plus ``/<joint>`` for a multi-joint file
 start time    ``Signals.start_time`` with ``Signals.start_time_source`` (the recording's own clock or
-              metadata) -> a date (and time) in the file name -> a Unix epoch in the file name
+              metadata; a clock before 2000, e.g. the node's simulation time from 0, is not a date) -> a date (and time) in the file name -> a Unix epoch in the file name
               (``..._1666994786.44.csv``) -> the file's modification time; the source is always said
 """
 
@@ -25,6 +25,8 @@ from ..diagnosis import loaders
 
 _DATE = re.compile(r"(?<!\d)(20\d\d)[-_]?(0[1-9]|1[0-2])[-_]?([0-2]\d|3[01])"
                    r"(?:[T_ -]?([01]\d|2[0-3])[-:_]?([0-5]\d)(?:[-:_]?([0-5]\d))?)?(?!\d)")
+#: a recording's clock earlier than this is a simulation / since-boot clock, not a date
+WALL_CLOCK_EPOCH = dt.datetime(2000, 1, 1, tzinfo=dt.timezone.utc)
 _EPOCH = re.compile(r"(?<!\d)(1[3-9]\d{8})(\.\d+)?(?!\d)")
 
 
@@ -81,8 +83,9 @@ def start_time(signals, path: str | Path) -> tuple[dt.datetime, str]:
     if st is not None:
         src = getattr(signals, "start_time_source", None) or "recording"
         when = _as_datetime(st)
-        if when is not None:
+        if when is not None and when >= WALL_CLOCK_EPOCH:
             return when, str(src)
+        # a clock that starts at 0 (simulation time, time since boot) is no date: fall through
     name = Path(path).name
     m = _DATE.search(name)
     if m:
