@@ -272,3 +272,14 @@ def test_simulation_clock_is_not_a_date(tmp_path):
     f = tmp_path / "2026-02-03.mcap"
     f.write_bytes(b"")
     assert source.start_time(Sim(), f)[1] == "file name (date)"
+
+
+def test_files_directly_in_the_root_share_the_folder_id(tmp_path):
+    from bldc_actuator.fleet import source
+
+    class S:
+        meta: dict = {}
+    d = tmp_path / "robot2"
+    d.mkdir()
+    ids = {source.actuator_id(S(), d / f"2026-01-0{k}_joints.csv", d, joint="J1") for k in (1, 2)}
+    assert ids == {"robot2/J1"}

@@ -162,13 +162,14 @@ def _process_joint(job: Job, joint, mapping) -> list[dict]:
 # ------------------------------------------------------------------------------------------ Dask
 
 def local_cluster(workers: int, threads: int = 1):
-    """A cluster of worker processes on this machine: scheduler and dashboard on 127.0.0.1 only."""
+    """A cluster of worker processes on this machine: scheduler and its HTTP server (dashboard when bokeh is
+    installed) on 127.0.0.1 only, at a free port (no clash with another cluster's 8787)."""
     from distributed import LocalCluster
 
     for k, v in WORKER_ENV.items():      # inherited by the worker processes
         os.environ.setdefault(k, v)
     return LocalCluster(n_workers=workers, threads_per_worker=threads, processes=True, host="127.0.0.1",
-                        dashboard_address=None, silence_logs=40)
+                        dashboard_address="127.0.0.1:0", silence_logs=40)
 
 
 @dataclass

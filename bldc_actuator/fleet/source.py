@@ -6,7 +6,8 @@ joint)`` and ``joints(path, profile)`` read every format through input profiles)
 what a fleet needs on top, in this order of preference:
 
 actuator id   ``Signals.actuator_id`` (a profile field or the recording's metadata) -> the path relative to
-              the search root without the file name (``robot7/knee/2026-01-02.mcap`` -> ``robot7/knee``)
+              the search root without the file name (``robot7/knee/2026-01-02.mcap`` -> ``robot7/knee``;
+              the folder's own name for files directly in the root)
               plus ``/<joint>`` for a multi-joint file
 start time    ``Signals.start_time`` with ``Signals.start_time_source`` (the recording's own clock or
               metadata; a clock before 2000, e.g. the node's simulation time from 0, is not a date) -> a date (and time) in the file name -> a Unix epoch in the file name
@@ -73,7 +74,8 @@ def actuator_id(signals, path: str | Path, root: str | Path | None, joint=None) 
         rel = p.parent.relative_to(Path(root).resolve()) if root else Path(p.parent.name)
     except ValueError:
         rel = Path(p.parent.name)
-    base = rel.as_posix() if rel.as_posix() not in ("", ".") else p.stem
+    # a file directly in the search root: the folder's name (every day's file of one robot, one id)
+    base = rel.as_posix() if rel.as_posix() not in ("", ".") else p.parent.name
     return f"{base}/{joint}" if joint is not None else base
 
 
