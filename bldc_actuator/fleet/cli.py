@@ -114,7 +114,12 @@ def main(args) -> int:
                 str(args.mapping) if args.mapping else None, not args.tracked_only, args.holdout) for i in items]
     where = args.scheduler or f"local cluster, {args.workers or 'CPU-count'} worker process(es)"
     print(f"fleet: {len(jobs)} file(s) on {where}", file=sys.stderr)
-    res = run(jobs, scheduler=args.scheduler, workers=args.workers, progress=not args.no_progress)
+    try:
+        res = run(jobs, scheduler=args.scheduler, workers=args.workers, progress=not args.no_progress)
+    except (OSError, TimeoutError) as exc:
+        print(f"bldc-actuator fleet: cannot reach the Dask scheduler {args.scheduler or '(local)'}: {exc}",
+              file=sys.stderr)
+        return 2
     out = args.out
     out.mkdir(parents=True, exist_ok=True)
     rows = sorted(res.rows, key=lambda r: (r["actuator_id"], r["start_time"], r["source"], r["parameter"]))

@@ -31,8 +31,8 @@ def static_root(pattern: str) -> Path:
 
 
 def expand(patterns: list[str]) -> list[Item]:
-    """Files matching any pattern (``**`` recurses; a directory means every recording under it), sorted,
-    each once. A pattern that matches nothing raises ValueError naming it."""
+    """Recordings (:data:`RECORDING_SUFFIXES`) matching any pattern (``**`` recurses; a directory means every
+    recording under it), sorted, each once. A pattern that matches nothing raises ValueError naming it."""
     seen: dict[str, Item] = {}
     for pat in patterns:
         p = Path(pat)
@@ -40,7 +40,7 @@ def expand(patterns: list[str]) -> list[Item]:
             root, matches = p, [str(x) for x in sorted(p.rglob("*")) if x.suffix.lower() in RECORDING_SUFFIXES]
         else:
             root, matches = static_root(pat), sorted(glob.glob(pat, recursive=True))
-        matches = [m for m in matches if Path(m).is_file()]
+        matches = [m for m in matches if Path(m).is_file() and Path(m).suffix.lower() in RECORDING_SUFFIXES]
         if not matches:
             raise ValueError(f"{pat}: no file matches this pattern (quote it so the shell does not expand it)")
         for m in matches:
