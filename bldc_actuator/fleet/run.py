@@ -89,10 +89,23 @@ def process_file(job: Job) -> dict[str, Any]:
         return {"rows": rows, "failures": failures, "seconds": time.perf_counter() - t0, "joints": 0}
     for joint in joint_list:
         try:
-            rows += _process_joint(job, joint, mapping)
+            with _single_threaded_blas():
+                rows += _process_joint(job, joint, mapping)
         except Exception as exc:  # noqa: BLE001
             failures.append(_failure(job, joint, "diagnose", exc))
     return {"rows": rows, "failures": failures, "seconds": time.perf_counter() - t0, "joints": len(joint_list)}
+
+
+def _single_threaded_blas():
+    """OpenBLAS single-threaded around the fits, also on a remote worker whose BLAS was loaded before
+    ``OPENBLAS_NUM_THREADS`` could be set (the diagnosis' own context manager; a no-op if it is gone)."""
+    import contextlib
+
+    try:
+        from ..diagnosis.pipeline import _SingleThreadedBLAS
+    except ImportError:
+        return contextlib.nullcontext()
+    return _SingleThreadedBLAS()
 
 
 def _params_for(job: Job, path_id: str):
