@@ -90,9 +90,11 @@ def process_file(job: Job) -> dict[str, Any]:
     for joint in joint_list:
         try:
             with _single_threaded_blas():
-                rows += _process_joint(job, joint, mapping)
+                r, f = _process_joint(job, joint, mapping)
+            rows += r
+            failures += f
         except Exception as exc:  # noqa: BLE001
-            failures.append(_failure(job, joint, "diagnose", exc))
+            failures.append(_failure(job, joint, "load-clean-prepare", exc))
     return {"rows": rows, "failures": failures, "seconds": time.perf_counter() - t0, "joints": len(joint_list)}
 
 
@@ -117,7 +119,8 @@ def _params_for(job: Job, path_id: str):
     return (load_yaml(pf), pf) if pf else (None, None)
 
 
-def _process_joint(job: Job, joint, mapping) -> list[dict]:
+def _process_joint(job: Job, joint, mapping) -> tuple[list[dict], list[dict]]:
+    """Rows of one joint and the failures of its stages (a failing stage keeps the other's rows)."""
     from ..diagnosis.cleaning import clean
     from . import source
     from .health import track
@@ -142,15 +145,22 @@ def _process_joint(job: Job, joint, mapping) -> list[dict]:
     from ..diagnosis import equation_error as ee
 
     ctx = ee.prepare([(sig, False)], params, holdout=job.holdout)
-    tracked = track(sig, params, holdout=job.holdout, ctx=ctx)
-    findings = []
+    failures = []
+    tracked, findings = [], []
+    try:
+        tracked = track(sig, params, holdout=job.holdout, ctx=ctx)
+    except Exception as exc:  # noqa: BLE001 - the diagnosis may still work
+        failures.append(_failure(job, joint, "tracked", exc))
     accepted: set[str] = set()
     if job.diagnose:
         from ..diagnosis.pipeline import DiagnoseOptions, diagnose
 
-        report = diagnose(sig, params, options=DiagnoseOptions(holdout=job.holdout)).to_dict()
-        findings = report.get("findings", [])
-        accepted = {f["effect"] for f in findings}
+        try:
+            report = diagnose(sig, params, options=DiagnoseOptions(holdout=job.holdout)).to_dict()
+            findings = report.get("findings", [])
+            accepted = {f["effect"] for f in findings}
+        except Exception as exc:  # noqa: BLE001 - the tracked rows stay
+            failures.append(_failure(job, joint, "diagnose", exc))
     rows = []
     for t in tracked:
         r = dict(base, source="tracked", effect=t.effect, parameter=t.parameter, value=t.value,
@@ -169,7 +179,7 @@ def _process_joint(job: Job, joint, mapping) -> list[dict]:
                                  heldout_before=_f(ho.get("before")), heldout_after=_f(ho.get("after")),
                                  heldout_metric=str(ho.get("metric", "")) + (f" [{ho['unit']}]" if ho.get("unit") else ""),
                                  accepted=True, status="ok", reason=""))
-    return rows
+    return rows, failures
 
 
 # ------------------------------------------------------------------------------------------ Dask
