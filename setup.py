@@ -27,6 +27,10 @@ SIM = [
     "matplotlib>=3.6",
     # compiles the physics kernel (bldc_actuator/kernel.py); without it the same source runs as plain Python
     "numba>=0.60",
+    # bldc-actuator fleet: Dask (local cluster or a scheduler), Parquet tables, progress bar
+    "dask[distributed]>=2023.1",
+    "pyarrow>=12",
+    "tqdm>=4.60",
 ]
 # rclpy and the message packages as PyPI wheels (ROS 2 Kilted builds); for a venv without a ROS install.
 ROS_WHEELS = [

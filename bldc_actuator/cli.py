@@ -17,6 +17,7 @@ SUBCOMMAND_MODULES = (
     "bldc_actuator.demo",
     "bldc_actuator.record_info",
     "bldc_actuator.diagnosis.cli",
+    "bldc_actuator.fleet.cli",
 )
 
 

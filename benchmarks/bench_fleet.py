@@ -1,0 +1,130 @@
+"""Fleet benchmark: a generated fleet (>= 200 recording x joint) through ``bldc-actuator fleet`` on 1 and 2
+local Dask workers. Prints recordings per minute and whether every planted drift was alerted on the right
+actuator and parameter with no alert on a stable actuator.
+
+    python benchmarks/bench_fleet.py [--out /tmp/bench_fleet] [--actuators 8] [--days 30] [--workers 1,2]
+                                     [--duration 20] [--rate 250] [--tracked-only] [--reuse]
+
+The machine's load matters (the figures are wall-clock): the script prints ``os.getloadavg()``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent))
+
+from benchmarks import fleet_gen as G  # noqa: E402
+from bldc_actuator.cli import main as cli  # noqa: E402
+
+OUTPUT_MAP = HERE / "fleet_profiles" / "output_csv.map.yaml"
+
+
+def _has_profiles() -> bool:
+    from bldc_actuator.diagnosis import loaders
+
+    return hasattr(loaders, "joints")
+
+
+WIDE_MAP = """time: time
+position: Position{j}*9
+velocity: Velocity{j}*9
+current: Cur{j}
+current_command: CurCmd{j}
+housing_temperature: Temp{j}
+"""
+
+
+def runs(root: Path, work: Path) -> list[tuple[str, list[str], str | None]]:
+    """(label, extra CLI args, actuator-id suffix) per run: one run over every file when input profiles
+    exist (auto-detected per file); without them (a build before profiles), one run per format a plain
+    mapping reads, and the wide CSV one joint at a time (a mapping per joint; the run's path-based id
+    ``robot2`` gets the joint appended for the check)."""
+    params = ["--params", str(root / "params.yaml")]
+    if _has_profiles():
+        return [("all formats", [str(root / "**" / "*.mcap"), str(root / "**" / "*.csv"), *params], None)]
+    out = [("mcap", [str(root / "**" / "*.mcap"), *params], None),
+           ("output_csv", [str(root / "robot[35]" / "**" / "*.csv"), *params, "--map", str(OUTPUT_MAP)], None)]
+    truth = json.loads((root / "truth.json").read_text())
+    for a in truth["actuators"]:
+        if a["format"] == "wide_csv":
+            robot, joint = a["actuator_id"].split("/")
+            j = int(joint.replace("joint", ""))
+            m = work / f"wide_joint{j}.map.yaml"
+            m.parent.mkdir(parents=True, exist_ok=True)
+            m.write_text(WIDE_MAP.format(j=j))
+            out.append((f"wide_j{j}", [str(root / robot / "*_joints.csv"), *params, "--map", str(m)], joint))
+    return out
+
+
+def check(truth: dict, alerts: list[dict], tested: list[dict]) -> dict:
+    want = {(a["actuator_id"], a["parameter"]) for a in truth["actuators"] if a["drift"]}
+    got = {(a["actuator_id"], a["parameter"]) for a in alerts}
+    ids = {t["actuator_id"] for t in tested}
+    return {"missed": sorted(want - got), "false": sorted(got - want),
+            "drifts_covered": sorted(w for w in want if w[0] in ids),
+            "stable_tested": sorted({t["actuator_id"] for t in tested} - {w[0] for w in want})}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", type=Path, default=Path("/tmp/bench_fleet"))
+    ap.add_argument("--actuators", type=int, default=8)
+    ap.add_argument("--days", type=int, default=30)
+    ap.add_argument("--duration", type=float, default=20.0)
+    ap.add_argument("--rate", type=float, default=250.0)
+    ap.add_argument("--workers", default="1,2")
+    ap.add_argument("--tracked-only", action="store_true")
+    ap.add_argument("--reuse", action="store_true", help="reuse a fleet already generated in OUT/fleet")
+    a = ap.parse_args(argv)
+    root = a.out / "fleet"
+    if a.reuse and (root / "truth.json").exists():
+        truth = json.loads((root / "truth.json").read_text())
+        print(f"reusing {root} ({truth['files']} files)")
+    else:
+        t0 = time.perf_counter()
+        truth = G.generate(root, a.actuators, a.days, a.duration, a.rate, corrupt=1)
+        print(f"generated {truth['files']} files ({a.actuators} actuators x {a.days} days, {a.duration:g} s at "
+              f"{a.rate:g} Hz, 1 corrupt) in {time.perf_counter() - t0:.0f} s")
+    print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPU(s)")
+    print(f"{'workers':>7} {'run':>12} {'rec x joint':>11} {'seconds':>8} {'rec/min':>8} {'alerts':>6} "
+          f"{'failures':>8}  planted drifts")
+    ok = True
+    for w in [int(x) for x in a.workers.split(",")]:
+        alerts, tested, failures, n, secs = [], [], [], 0, 0.0
+        plan = runs(root, a.out)
+        for label, args, suffix in plan:
+            out = a.out / f"out_w{w}_{label.replace(' ', '_')}"
+            extra = ["--tracked-only"] if a.tracked_only else []
+            rc = cli(["fleet", *args, "--out", str(out), "--workers", str(w), "--no-progress", *extra])
+            if rc != 0:
+                print(f"fleet run failed ({rc})")
+                return rc
+            doc = json.loads((out / "alerts.json").read_text())
+            if suffix:
+                for rec in doc["alerts"] + doc["tested"]:
+                    rec["actuator_id"] = f"{rec['actuator_id']}/{suffix}"
+            alerts += doc["alerts"]
+            tested += doc["tested"]
+            failures += doc["failures"]
+            n += doc["summary"]["recordings"]
+            secs += doc["summary"]["seconds"]
+            res = check(truth, alerts, tested)
+        good = not res["false"] and not [m for m in res["missed"] if m in res["drifts_covered"]]
+        ok &= good
+        label = "all formats" if len(plan) == 1 else "per format"
+        print(f"{w:>7} {label:>12} {n:>11} {secs:>8.1f} {60 * n / secs:>8.1f} "
+              f"{len(alerts):>6} {len(failures):>8}  {'all alerted, none on stable' if good else res}")
+        if res["drifts_covered"] != sorted({(x['actuator_id'], x['parameter']) for x in truth['actuators'] if x['drift']}):
+            print("        (not every planted drift was covered by a run)")
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

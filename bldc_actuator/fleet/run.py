@@ -1,0 +1,274 @@
+"""Diagnose every recording x joint of a fleet on Dask and collect one table.
+
+:func:`process_file` is the unit of work (one file, all its joints; never raises: a failure becomes a
+record). :func:`run` maps it over the files on a ``distributed`` cluster -- a ``LocalCluster`` of worker
+PROCESSES on this machine by default (one thread each, scheduler and dashboard bound to 127.0.0.1), or an
+existing scheduler (``tcp://host:8786``) -- with a progress bar, and returns the rows and failures.
+
+Row schema (one row per recording x joint x parameter; :data:`COLUMNS`):
+
+``recording`` path, ``joint`` (empty for single-joint files), ``actuator_id``, ``start_time`` (ISO 8601,
+UTC), ``start_time_source``, ``source`` (``tracked``: the health estimator of :mod:`.health`, every
+recording; ``finding``: a parameter of an effect ``diagnose`` accepted), ``effect``, ``parameter``,
+``value``, ``uncertainty`` (1 sigma), ``unit``, ``nominal``, ``heldout_before``, ``heldout_after``,
+``heldout_metric``, ``accepted`` (``diagnose`` accepted this effect in this recording), ``status`` (``ok``,
+``not_checkable``, ``failed``), ``reason``, ``profile``, ``params_file``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+import traceback
+import uuid
+from dataclasses import dataclass, field
+from typing import Any
+
+COLUMNS = ("recording", "joint", "actuator_id", "start_time", "start_time_source", "source", "effect",
+           "parameter", "value", "uncertainty", "unit", "nominal", "heldout_before", "heldout_after",
+           "heldout_metric", "accepted", "status", "reason", "profile", "params_file")
+
+#: environment for worker processes: single-threaded BLAS (the fits are small; threads only contend),
+#: ROS discovery kept on this host
+WORKER_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
+              "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "MPLBACKEND": "Agg"}
+
+
+@dataclass
+class Job:
+    """Everything a worker needs for one file (plain data: it travels to other machines)."""
+
+    path: str
+    root: str
+    params_file: str | None = None
+    params_map: list = field(default_factory=list)
+    profile: str | None = None
+    mapping_file: str | None = None
+    diagnose: bool = True           #: also run the full diagnosis (findings rows); tracked rows always
+    holdout: float = 0.3
+
+
+def _f(x) -> float:
+    try:
+        x = float(x)
+    except (TypeError, ValueError):
+        return float("nan")
+    return x
+
+
+def _base_row(job: Job, joint, aid: str, start: str, start_src: str, params_file: str | None) -> dict[str, Any]:
+    return {"recording": job.path, "joint": "" if joint is None else str(joint), "actuator_id": aid,
+            "start_time": start, "start_time_source": start_src, "profile": job.profile or "",
+            "params_file": params_file or ""}
+
+
+def _failure(job: Job, joint, stage: str, exc: BaseException) -> dict[str, Any]:
+    msg = f"{type(exc).__name__}: {exc}"
+    return {"recording": job.path, "joint": "" if joint is None else str(joint), "stage": stage, "error": msg,
+            "traceback": "".join(traceback.format_exception(type(exc), exc, exc.__traceback__))[-2000:]}
+
+
+def process_file(job: Job) -> dict[str, Any]:
+    """Diagnose every joint of one file. Returns ``{"rows": [...], "failures": [...], "seconds": s,
+    "joints": n}``; never raises."""
+    for k, v in WORKER_ENV.items():
+        os.environ.setdefault(k, v)
+    t0 = time.perf_counter()
+    rows: list[dict] = []
+    failures: list[dict] = []
+    try:
+        from ..diagnosis.loaders import Mapping
+        from . import source
+
+        mapping = Mapping.from_yaml(job.mapping_file) if job.mapping_file else None
+        joint_list = source.joints(job.path, profile=job.profile)
+    except Exception as exc:  # noqa: BLE001 - reported, the run goes on
+        failures.append(_failure(job, None, "open", exc))
+        return {"rows": rows, "failures": failures, "seconds": time.perf_counter() - t0, "joints": 0}
+    for joint in joint_list:
+        try:
+            with _single_threaded_blas():
+                r, f = _process_joint(job, joint, mapping)
+            rows += r
+            failures += f
+        except Exception as exc:  # noqa: BLE001
+            failures.append(_failure(job, joint, "load-clean-prepare", exc))
+    return {"rows": rows, "failures": failures, "seconds": time.perf_counter() - t0, "joints": len(joint_list)}
+
+
+def _single_threaded_blas():
+    """OpenBLAS single-threaded around the fits, also on a remote worker whose BLAS was loaded before
+    ``OPENBLAS_NUM_THREADS`` could be set (the diagnosis' own context manager; a no-op if it is gone)."""
+    import contextlib
+
+    try:
+        from ..diagnosis.pipeline import _SingleThreadedBLAS
+    except ImportError:
+        return contextlib.nullcontext()
+    return _SingleThreadedBLAS()
+
+
+def _params_for(job: Job, path_id: str):
+    from ..params import load_yaml
+    from .discover import params_for
+
+    pf = params_for(job.params_map, path_id, job.path) if job.params_map else None
+    pf = pf or job.params_file
+    return (load_yaml(pf), pf) if pf else (None, None)
+
+
+def _process_joint(job: Job, joint, mapping) -> tuple[list[dict], list[dict]]:
+    """Rows of one joint and the failures of its stages (a failing stage keeps the other's rows)."""
+    from ..diagnosis.cleaning import clean
+    from . import source
+    from .health import track
+
+    path_id = source.actuator_id(None, job.path, job.root, joint)
+    params, pf = _params_for(job, path_id)
+    raw = source.load(job.path, joint=joint, profile=job.profile, mapping=mapping, params=params)
+    if params is None:
+        params = raw.meta.get("params_from_recording")
+        pf = "(parameters recorded in the file)" if params is not None else None
+        if params is None:
+            raise ValueError(f"{job.path}: no nominal parameters: give --params FILE or --params-map FILE "
+                             "(this recording carries none)")
+    aid = source.actuator_id(raw, job.path, job.root, joint)
+    if job.params_map and aid != path_id:
+        p2, pf2 = _params_for(job, aid)
+        if p2 is not None and pf2 != pf:
+            params, pf = p2, pf2
+    when, when_src = source.start_time(raw, job.path)
+    sig = clean(raw, params=params)
+    base = _base_row(job, joint, aid, when.isoformat(), when_src, pf)
+    from ..diagnosis import equation_error as ee
+
+    ctx = ee.prepare([(sig, False)], params, holdout=job.holdout)
+    failures = []
+    tracked, findings = [], []
+    try:
+        tracked = track(sig, params, holdout=job.holdout, ctx=ctx)
+    except Exception as exc:  # noqa: BLE001 - the diagnosis may still work
+        failures.append(_failure(job, joint, "tracked", exc))
+    accepted: set[str] = set()
+    if job.diagnose:
+        from ..diagnosis.pipeline import DiagnoseOptions, diagnose
+
+        try:
+            report = diagnose(sig, params, options=DiagnoseOptions(holdout=job.holdout)).to_dict()
+            findings = report.get("findings", [])
+            accepted = {f["effect"] for f in findings}
+        except Exception as exc:  # noqa: BLE001 - the tracked rows stay
+            failures.append(_failure(job, joint, "diagnose", exc))
+    rows = []
+    for t in tracked:
+        r = dict(base, source="tracked", effect=t.effect, parameter=t.parameter, value=t.value,
+                 uncertainty=t.uncertainty, unit=t.unit, nominal=t.nominal, heldout_before=t.heldout_before,
+                 heldout_after=t.heldout_after, heldout_metric=t.heldout_metric,
+                 accepted=t.effect in accepted, status=t.status, reason=t.reason)
+        rows.append(r)
+    for f in findings:
+        ho = f.get("held_out") or {}
+        units = f.get("units") or {}
+        unc = f.get("uncertainty") or {}
+        for name, value in (f.get("parameters") or {}).items():
+            if isinstance(value, (int, float)) and not isinstance(value, bool):
+                rows.append(dict(base, source="finding", effect=f["effect"], parameter=name, value=_f(value),
+                                 uncertainty=_f(unc.get(name)), unit=str(units.get(name, "")), nominal=float("nan"),
+                                 heldout_before=_f(ho.get("before")), heldout_after=_f(ho.get("after")),
+                                 heldout_metric=str(ho.get("metric", "")) + (f" [{ho['unit']}]" if ho.get("unit") else ""),
+                                 accepted=True, status="ok", reason=""))
+    return rows, failures
+
+
+# ------------------------------------------------------------------------------------------ Dask
+
+def local_cluster(workers: int, threads: int = 1):
+    """A cluster of worker processes on this machine: scheduler and its HTTP server (dashboard when bokeh is
+    installed) on 127.0.0.1 only, at a free port (no clash with another cluster's 8787)."""
+    from distributed import LocalCluster
+
+    for k, v in WORKER_ENV.items():      # inherited by the worker processes
+        os.environ.setdefault(k, v)
+    return LocalCluster(n_workers=workers, threads_per_worker=threads, processes=True, host="127.0.0.1",
+                        dashboard_address="127.0.0.1:0", silence_logs=40)
+
+
+@dataclass
+class RunResult:
+    rows: list[dict]
+    failures: list[dict]
+    files: int
+    joints: int
+    seconds: float
+    workers: int
+    scheduler: str
+
+
+def run(jobs: list[Job], *, scheduler: str | None = None, workers: int | None = None, progress: bool = True,
+        client=None) -> RunResult:
+    """Process ``jobs`` on Dask (see the module docstring). ``client``: an existing ``distributed.Client``."""
+    from distributed import Client, as_completed
+
+    t0 = time.perf_counter()
+    cluster = None
+    own_client = client is None
+    if client is None:
+        if scheduler:
+            client = Client(scheduler, timeout="30s")
+        else:
+            n = workers or max(1, min(os.cpu_count() or 1, len(jobs)))
+            cluster = local_cluster(n)
+            client = Client(cluster)
+    try:
+        n_workers = len(client.scheduler_info().get("workers", {}))
+        where = scheduler or getattr(client.scheduler, "address", "local")
+        tag = uuid.uuid4().hex[:8]
+        futures = client.map(process_file, jobs, pure=False, key=[f"fleet-{tag}-{i}" for i in range(len(jobs))])
+        index = {f.key: j for f, j in zip(futures, jobs)}
+        bar = _bar(len(jobs), progress)
+        rows, failures, joints = [], [], 0
+        for fut in as_completed(futures):
+            job = index[fut.key]
+            try:
+                res = fut.result()
+            except Exception as exc:  # noqa: BLE001 - a worker died or the task could not run
+                failures.append(_failure(job, None, "worker", exc))
+                res = None
+            if res is not None:
+                rows += res["rows"]
+                failures += res["failures"]
+                joints += res["joints"]
+            bar.update(1)
+            if failures:
+                bar.set_postfix(failed=len({f["recording"] for f in failures}))
+            fut.release()
+        bar.close()
+    finally:
+        if own_client:
+            client.close()
+        if cluster is not None:
+            cluster.close()
+    return RunResult(rows, failures, len(jobs), joints, time.perf_counter() - t0, n_workers, str(where))
+
+
+def _bar(total: int, enabled: bool):
+    try:
+        from tqdm import tqdm
+
+        return tqdm(total=total, unit="file", desc="fleet", disable=not enabled, file=sys.stderr,
+                    dynamic_ncols=True)
+    except ImportError:   # pragma: no cover - tqdm is a dependency
+        class _Quiet:
+            def update(self, n): pass
+            def set_postfix(self, **kw): pass
+            def close(self): pass
+        return _Quiet()
+
+
+def is_finite(x) -> bool:
+    try:
+        return math.isfinite(float(x))
+    except (TypeError, ValueError):
+        return False
