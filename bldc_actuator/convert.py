@@ -106,7 +106,10 @@ def register(subparsers) -> argparse.ArgumentParser:
                    help="torque constant: motor torque per ampere of the current named by --kt-frame [N*m/A]")
     p.add_argument("--kt-frame", choices=frames.TORQUE_CONSTANT_FRAMES, default=None,
                    help="current the --kt value is per (required with --kt). per_phase_amplitude is the paper's "
-                        "per-winding constant amplitude; phase_peak is total torque per phase-current amplitude")
+                        "per-winding constant amplitude; phase_peak is total torque per phase-current amplitude; "
+                        "q_amplitude_invariant / q_power_invariant transform the WINDING currents; "
+                        "drive_amplitude_invariant / drive_power_invariant are what a FOC drive (ODrive, VESC) "
+                        "reports: it transforms the LINE currents (differs from q_* on a delta motor by sqrt(3))")
     p.add_argument("--kb", type=_number("--kb", "V*s/rad (or --kb-unit)"), metavar="KB",
                    help="back-EMF constant in the voltage frame --kb-frame, per mechanical speed")
     p.add_argument("--kb-frame", choices=frames.BACK_EMF_FRAMES, default=None,
@@ -273,9 +276,14 @@ def _extra_section(res: WindingResult, pole_pairs: Optional[int]) -> Optional[_S
         f"Kbar_b^ll = {_g(frames.back_emf_constant_from_q(k, 'll_peak', w))} V*s/rad -> Kv = "
         f"{_g(frames.kv_from_back_emf_constant_q(k, w))} rpm/V (ll peak); torque = sqrt(3)/2 Kbar_b^ll Ibar^l "
         "for either winding [eq. kb_ll_torque]",
-        f"K_t per phase-current amplitude (Maxon/TQ style, = amplitude-invariant drives) = "
+        f"K_t per phase-current amplitude (Maxon/TQ datasheet style) = "
         f"{_g(frames.torque_constant_from_q(k, 'phase_peak', w))} N*m/A;  per line A rms = "
         f"{_g(frames.torque_constant_from_q(k, 'line_rms', w))} N*m/A",
+        f"K_t as an amplitude-invariant drive reports it (ODrive, VESC: torque per its i_q, the amplitude of the "
+        f"LINE currents it measures; --kt-frame drive_amplitude_invariant) = "
+        f"{_g(frames.torque_constant_from_q(k, 'drive_amplitude_invariant', w))} N*m/A"
+        + ("" if w == "wye" else " (delta: sqrt(3) below the per-phase-amplitude value; entering it as "
+                                 "q_amplitude_invariant would make K_t^q sqrt(3) too small)"),
     ]
     if pole_pairs:
         psi_d = frames.flux_linkage_d_from_back_emf_constant_q(k, pole_pairs)

@@ -94,7 +94,13 @@ TWO_PI_3 = 2.0 * math.pi / 3.0
 
 #: current frames (what a datasheet's "A" means). ``q`` is an alias of ``q_power_invariant``.
 CURRENT_FRAMES = ("phase_peak", "phase_rms", "line_peak", "line_rms", "q_power_invariant",
-                  "q_amplitude_invariant")
+                  "q_amplitude_invariant", "drive_amplitude_invariant", "drive_power_invariant")
+#: ``q_amplitude_invariant`` / ``q_power_invariant`` are d-q transforms of the WINDING (phase) currents. A drive
+#: (ODrive, VESC, most FOC firmware) measures and transforms the currents in the motor LEADS (line currents)
+#: without knowing the winding: ``drive_amplitude_invariant`` is its amplitude-invariant i_q (= line-current
+#: amplitude), ``drive_power_invariant`` its power-invariant one. On a wye motor they equal the q_ frames; on
+#: a delta motor the line currents are sqrt(3) x the winding currents, so a drive's K_t = torque / its i_q is
+#: sqrt(3) BELOW the per-phase-amplitude value.
 #: voltage frames (and back-EMF constant frames: volts of that frame per mechanical rad/s)
 VOLTAGE_FRAMES = ("phase_peak", "phase_rms", "ll_peak", "ll_rms", "q_power_invariant", "q_amplitude_invariant")
 BACK_EMF_FRAMES = VOLTAGE_FRAMES
@@ -439,8 +445,18 @@ def _current_factor(frame: str, winding: str) -> tuple[float, str, str]:
                      (1.0, "I^q = I^l_rms", "eq. current_delta with I_peak = sqrt(2) I_rms")),
         "q_power_invariant": (1.0, "I^q = I^q", "definition"),
         "q_amplitude_invariant": (SQRT3_2, "I^q = sqrt(3/2) * I^q_amplitude_invariant",
-                                  "amplitude-invariant I^q equals I^phi_peak (footnote in sec. d-q transformation)"),
+                                  "amplitude-invariant I^q of the WINDING currents equals I^phi_peak (footnote in "
+                                  "sec. d-q transformation)"),
     }
+    line = table["line_peak"]
+    # a drive transforms the LINE currents it measures: its amplitude-invariant i_q is the line-current
+    # amplitude, its power-invariant i_q sqrt(3/2) times that
+    table["drive_amplitude_invariant"] = (
+        line[0], f"{line[1]} (a drive's amplitude-invariant i_q = line-current amplitude)",
+        f"{line[2]}; drives transform the currents in the motor leads")
+    table["drive_power_invariant"] = (
+        line[0] / SQRT3_2, f"I^q = {'1' if w == 'wye' else 'sqrt(1/3)'} * I^q_drive (drive's power-invariant i_q "
+        "= sqrt(3/2) x line-current amplitude)", f"{line[2]}; drives transform the currents in the motor leads")
     return table[frame]
 
 
@@ -713,6 +729,8 @@ def torque_constant_q_from(kt, frame: str, winding: Winding, *, bus_modulation: 
     ``q_power_invariant``       1                   1
     ``q_amplitude_invariant``   :math:`\sqrt{2/3}`  :math:`\sqrt{2/3}`
     ``per_phase_amplitude``     :math:`\sqrt{3/2}`  :math:`\sqrt{3/2}`
+    ``drive_amplitude_invariant`` :math:`\sqrt{2/3}` :math:`\sqrt2`
+    ``drive_power_invariant``   1                   :math:`\sqrt3`
     ``bus`` (full modulation)   :math:`1/\sqrt2`    :math:`\sqrt{3/2}`
     ==========================  ==================  ===================
 
@@ -737,6 +755,46 @@ def torque_constant_from_q(kt_q, frame: str, winding: Winding, *, bus_modulation
     """Inverse of :func:`torque_constant_q_from`: datasheet-style torque constant (N·m/A) in ``frame``."""
     frame = _frame(frame, TORQUE_CONSTANT_FRAMES, "torque constant")
     return kt_q / _torque_constant_factor(frame, winding, bus_modulation)[0]
+
+
+def _surd_name(ratio: float) -> str:
+    """``ratio`` = sqrt(2^a 3^b) by name: sqrt(3/2), 2/sqrt(3), 3/sqrt(2), sqrt(6), 1/3 ..."""
+    a_b = min(((a, b) for a in range(-6, 7) for b in range(-6, 7)),
+              key=lambda ab: abs(math.log(ratio) - 0.5 * (ab[0] * math.log(2) + ab[1] * math.log(3))))
+    a, b = a_b
+    num, den = 2 ** max(a, 0) * 3 ** max(b, 0), 2 ** max(-a, 0) * 3 ** max(-b, 0)
+    rn, rd = math.isqrt(num), math.isqrt(den)
+    sq_n, sq_d = rn * rn == num, rd * rd == den
+    if sq_n and sq_d:
+        return f"{rn}" if rd == 1 else f"{rn}/{rd}"
+    if sq_d:
+        return f"sqrt({num})" + (f"/{rd}" if rd != 1 else "")
+    if sq_n:
+        return f"{rn}/sqrt({den})"
+    return f"sqrt({num}/{den})"
+
+
+def torque_constant_frame_factors(max_ratio: float = 4.0) -> dict[str, tuple[float, str]]:
+    """Every ratio ``K_t_q(true) / K_t_q(entered)`` that a torque constant produces when it is read in one
+    frame and entered as another (either winding; also a wye assumption on a delta motor): name ->
+    (ratio, one way it arises). This is the list ``torque_constant_error`` in diagnosis matches against; it
+    includes the factors of drives on delta motors (a drive's K_t entered as ``q_amplitude_invariant`` on a
+    delta motor: sqrt(3))."""
+    frames_ = sorted((f for f in TORQUE_CONSTANT_FRAMES if f != "bus"), key=lambda f: not f.startswith("drive_"))
+    out: dict[str, tuple[float, str]] = {}
+    for w_true, w_entered in (("delta", "delta"), ("wye", "wye"), ("delta", "wye"), ("wye", "delta")):
+        for f_true in frames_:
+            for f_entered in frames_:
+                r = (_torque_constant_factor(f_true, w_true, 1.0)[0]
+                     / _torque_constant_factor(f_entered, w_entered, 1.0)[0])
+                if abs(r - 1.0) < 1e-9 or not (1.0 / max_ratio <= r <= max_ratio):
+                    continue
+                name = _surd_name(r)
+                if name not in out:
+                    how = (f"a {f_true} K_t of a {w_true} motor entered as {f_entered}"
+                           + ("" if w_true == w_entered else f" of a {w_entered} motor"))
+                    out[name] = (r, how)
+    return dict(sorted(out.items(), key=lambda kv: kv[1][0]))
 
 
 def back_emf_constant_q_from_flux_linkage(psi_pm_phase_peak, pole_pairs):

@@ -205,7 +205,10 @@ def test_datasheet_torque_constants_in_every_current_frame(bench, frame):
     ss = bench.ss
     i_frame = {"phase_peak": amp(ss.i_w[0]), "phase_rms": amp(ss.i_w[0]) / S2, "line_peak": amp(ss.i_line[0]),
                "line_rms": amp(ss.i_line[0]) / S2, "q_power_invariant": bench.i_q,
-               "q_amplitude_invariant": float(np.mean(fr.abc_to_dq_amplitude_invariant(*ss.i_w, TH)[1]))}[frame]
+               "q_amplitude_invariant": float(np.mean(fr.abc_to_dq_amplitude_invariant(*ss.i_w, TH)[1])),
+               # a drive transforms the LINE currents it measures (it does not know the winding)
+               "drive_amplitude_invariant": float(np.mean(np.hypot(*fr.abc_to_dq_amplitude_invariant(*ss.i_line, TH)))),
+               "drive_power_invariant": float(np.mean(np.hypot(*fr.abc_to_dq(*ss.i_line, TH))))}[frame]
     kt = bench.tau / i_frame
     assert float(fr.torque_constant_q_from(kt, frame, bench.w)) == pytest.approx(bench.k_q, rel=EXACT)
 
@@ -541,3 +544,42 @@ def test_abc_model_validates_inputs():
         am.AbcMotor("wye", 1, 1e-4, 0, 0.1, pole_pairs=0)
     with pytest.raises(ValueError, match="modes"):
         am.Drive(("v", "x", "open"))
+
+
+@pytest.mark.parametrize("winding", WINDINGS)
+def test_drive_frames_are_the_dq_transform_of_the_line_currents(winding):
+    """A drive (ODrive, VESC) measures the LINE currents and transforms them without knowing the winding. On the
+    abc circuit at the best line-current phase: torque / (its amplitude-invariant i_q) = K_t in the frame
+    drive_amplitude_invariant, torque / (its power-invariant i_q) = drive_power_invariant; on a delta motor the
+    former is sqrt(3) below the per-phase-amplitude (Maxon/TQ "phase_peak") K_t (issue #7: 0.0827, not 0.1432)."""
+    m = am.AbcMotor(winding, 0.4, 150e-6, -40e-6, 0.05, pole_pairs=7)
+    omega, i_line = 40.0, 5.0
+    k_q = float(fr.back_emf_constant_q_from(am.measure_back_emf_ll(m, omega)[0], "ll_peak", winding))
+    best = None
+    for ph in np.linspace(-np.pi, np.pi, 721):
+        r = am.steady_state_line_currents(m, i_line, TH, omega, ph)
+        tau = float(np.mean(r.torque))
+        if best is None or tau > best[0]:
+            best = (tau, r, ph)
+    tau, res, ph = best
+    i_l = res.i_line if hasattr(res, "i_line") else m.line_currents(res.i_w)
+    d_amp, q_amp = fr.abc_to_dq_amplitude_invariant(i_l[0], i_l[1], i_l[2], TH)
+    d_pi, q_pi = fr.abc_to_dq(i_l[0], i_l[1], i_l[2], TH)
+    iq_amp = float(np.mean(np.hypot(d_amp, q_amp)))
+    iq_pi = float(np.mean(np.hypot(d_pi, q_pi)))
+    assert iq_amp == pytest.approx(i_line, rel=1e-3)            # the drive's i_q = line-current amplitude
+    kt_drive_amp, kt_drive_pi = tau / iq_amp, tau / iq_pi
+    # the frames' conversions agree with the circuit (the phase search is 0.5 deg: cos error < 4e-5)
+    assert fr.torque_constant_q_from(kt_drive_amp, "drive_amplitude_invariant", winding) == pytest.approx(k_q, rel=1e-4)
+    assert fr.torque_constant_q_from(kt_drive_pi, "drive_power_invariant", winding) == pytest.approx(k_q, rel=1e-4)
+    kt_phase_peak = fr.torque_constant_from_q(k_q, "phase_peak", winding)
+    ratio = kt_phase_peak / kt_drive_amp
+    assert ratio == pytest.approx(1.0 if winding == "wye" else math.sqrt(3), rel=1e-4)
+    # entered as q_amplitude_invariant, a delta drive's K_t gives K_t^q sqrt(3) too small: a factor diagnose names
+    wrong = fr.torque_constant_q_from(kt_drive_amp, "q_amplitude_invariant", winding)
+    factors = fr.torque_constant_frame_factors()
+    if winding == "delta":
+        assert k_q / wrong == pytest.approx(math.sqrt(3), rel=1e-4)
+        assert factors["sqrt(3)"][0] == pytest.approx(k_q / wrong, rel=1e-4)
+    else:
+        assert wrong == pytest.approx(k_q, rel=1e-4)

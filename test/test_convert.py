@@ -233,3 +233,19 @@ def test_range_and_unit_in_message(capsys):
         cli.main(["convert", "--kv", "-3"])
     err = capsys.readouterr().err
     assert "> 0" in err and "rpm/V" in err
+
+
+def test_delta_drive_frame_is_printed_and_accepted(capsys):
+    """Issue #7: on a delta motor an amplitude-invariant drive reports K_t = K_t^q/sqrt(2) (per line-current
+    amplitude), sqrt(3) below the per-phase-amplitude value; a drive's K_t entered with that frame gives back
+    the same K_t^q."""
+    code, out, _ = run(capsys, "--winding", "delta", "--kv", "100", "--terminal-resistance", "0.186",
+                       "--terminal-inductance", "1.2e-4", "--bus-voltage", "24")
+    assert code == 0
+    phase = re.search(r"phase-current amplitude \(Maxon/TQ datasheet style\) = ([0-9.]+)", out)
+    drive = re.search(r"drive_amplitude_invariant\) = ([0-9.]+)", out)
+    assert float(phase.group(1)) == pytest.approx(0.143239, rel=1e-5)
+    assert float(drive.group(1)) == pytest.approx(0.0826993, rel=1e-5)
+    assert "= amplitude-invariant drives" not in out          # the old, wrong label
+    code, out2, _ = run(capsys, "--winding", "delta", "--kt", "0.0826993", "--kt-frame", "drive_amplitude_invariant")
+    assert code == 0 and "motor.torque_constant_q = 0.11695" in out2

@@ -20,14 +20,11 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .. import effects
+from .. import effects, frames
 
-#: frame factors a torque-constant error is compared with (fitted K / nominal K)
-FRAME_FACTORS = {
-    "sqrt(3/2)": math.sqrt(1.5), "sqrt(2/3)": math.sqrt(2 / 3), "sqrt(2)": math.sqrt(2), "1/sqrt(2)": 1 / math.sqrt(2),
-    "sqrt(3)": math.sqrt(3), "1/sqrt(3)": 1 / math.sqrt(3), "3/2": 1.5, "2/3": 2 / 3, "2/sqrt(3)": 2 / math.sqrt(3),
-    "sqrt(3)/2": math.sqrt(3) / 2, "2": 2.0, "1/2": 0.5, "3": 3.0, "1/3": 1 / 3,
-}
+#: frame factors a torque-constant error is compared with (fitted K / nominal K): every ratio a K_t read in one
+#: frame and entered as another produces, drives on delta motors included (:func:`frames.torque_constant_frame_factors`)
+FRAME_FACTORS = {name: value for name, (value, _) in frames.torque_constant_frame_factors().items()}
 
 
 def match_frame_factor(ratio: float, sigma: float) -> str:
