@@ -310,6 +310,9 @@ class _Base:
 
     def step(self, dt: float) -> None:
         """Advance the simulation by ``dt`` seconds (any size; rounded to whole ns)."""
+        if self._rs is None and dt > 0.0 and dt < 1e9:   # the hot path: straight into the compiled kernel
+            kernel.step_all(self._cs, self._ss, int(round(dt * 1e9)))
+            return
         self.step_ns(_seconds_to_ns(dt))
 
     def step_ns(self, dt_ns: int) -> None:
@@ -358,6 +361,7 @@ class Actuator(_Base):
         self.params = params if params is not None else ActuatorParams()
         th = self.params.thermal
         self._init_kernel([self.params], th.initial_winding_temperature, th.initial_housing_temperature)
+        self._v_mode = False
         if state is not None:
             self.set_state(state)
 
@@ -367,7 +371,12 @@ class Actuator(_Base):
         if not math.isfinite(i_q_ref):
             raise ValueError(f"current command: expected a finite q-axis current [A], got {i_q_ref!r}")
         self._set("cmd_q", float(i_q_ref))
-        self._set("v_mode", False)
+        self._current_mode()
+
+    def _current_mode(self) -> None:
+        if self._v_mode:
+            self._set("v_mode", False)
+            self._v_mode = False
 
     def set_voltage_command(self, v_d: float, v_q: float) -> None:
         """Open-loop voltage mode [V, d-q power-invariant]: the current controller is bypassed (the
@@ -376,13 +385,14 @@ class Actuator(_Base):
             raise ValueError(f"voltage command: expected finite d/q voltages [V], got {v_d!r}, {v_q!r}")
         self._set("v_cmd", complex(v_d, v_q))
         self._set("v_mode", True)
+        self._v_mode = True
 
     def set_torque_command(self, tau_out: float) -> None:
         """Output-side torque command [N·m] → ``i_q_ref = τ / (K_t_q N)`` with the nominal K_t_q."""
         if not math.isfinite(tau_out):
             raise ValueError(f"torque command: expected a finite output torque [N*m], got {tau_out!r}")
         self._set("cmd_q", self._torque_to_current(float(tau_out)))
-        self._set("v_mode", False)
+        self._current_mode()
 
     def set_load_torque(self, tau_out: float) -> None:
         """Extra external load torque at the output [N·m], added to ``load.load_torque``."""
