@@ -48,7 +48,7 @@ from sensor_msgs.msg import JointState, Temperature
 from std_msgs.msg import Empty, Float64, Float64MultiArray, MultiArrayDimension
 
 from . import node_params as NP
-from .model import Actuator
+from .model import COMPILED, Actuator, warm_up
 from .params import SPECS, ParameterError, from_flat
 
 NODE_NAME = "bldc_actuator"
@@ -170,6 +170,9 @@ class ActuatorNode(Node):
             self.destroy_node()
             raise
         self.node_values = nv
+        # compile (or load from numba's cache) the physics kernel now, before simulation time is tied to the
+        # wall clock: a first step that compiles would otherwise be a slip of seconds
+        self.kernel_warm_up_s = warm_up()
         self.joints = [_Joint(name, p, k) for k, (name, p) in enumerate(joint_params.items())]
         self.multi = explicit   # joints given: per-joint topics under ~/<joint>/
         self.joint_name = self.joints[0].name
@@ -243,7 +246,10 @@ class ActuatorNode(Node):
             self._publish_state()
             if self._timer is None and not self.lock_step:
                 self._anchor()
-                self._timer = self.create_timer(max(self.period_ns * 1e-9, 1e-3), self._on_tick,
+                # the timer wakes twice per publish period: a period becomes due at most half a period
+                # before it is published, whatever the timer's phase (publish lateness p99 at 1 kHz: see
+                # benchmarks/bench_node.py); a wake-up with nothing due costs a few microseconds
+                self._timer = self.create_timer(max(0.5 * self.period_ns * 1e-9, 5e-4), self._on_tick,
                                                 clock=self._steady)
 
     def close(self) -> None:
@@ -842,7 +848,9 @@ def main(argv: list[str] | None = None) -> int:
         executor.add_node(node)
         node.get_logger().info(
             f"running: {'lock-step' if node.lock_step else 'time_factor ' + str(node.node_values['node.time_factor'])}"
-            f", publish {1e9 / node.period_ns:g} Hz, physics {node.params.drive.current_loop_rate:g} Hz")
+            f", {len(node.joints)} joint(s), publish {1e9 / node.period_ns:g} Hz, physics "
+            f"{node.params.drive.current_loop_rate:g} Hz; kernel ready in {node.kernel_warm_up_s:.2f} s "
+            f"({'compiled' if COMPILED else 'pure Python'})")
         # with a timeout: EventsExecutor's spin_until_future_complete without one never returns (Kilted)
         while not node.done.done() and rclpy.ok():
             executor.spin_until_future_complete(node.done, timeout_sec=0.25)
