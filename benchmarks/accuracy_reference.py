@@ -33,13 +33,15 @@ except ImportError:  # pragma: no cover
 
 
 @njit(cache=True)
-def _reference(cmd, tick_s, substeps, R, L, K, J, b, p, V_max, Kp, Ki, decouple, I_lim):
-    """RK4 of the continuous plant between controller ticks; returns i_q, i_d, ω at every tick."""
+def _reference(cmd, tick_s, substeps, R, L, K, J, b, p, V_max, Kp, Ki, decouple, I_lim, delay_substeps):
+    """RK4 of the continuous plant between controller ticks; returns i_q, i_d, ω at every tick. The voltage
+    computed at a tick reaches the plant ``delay_substeps`` substeps later (a computation delay)."""
     n = cmd.shape[0]
     out = np.zeros((n, 3))
     i = 0j
     w = 0.0
     z = 0j
+    v_old = 0j
     h = tick_s / substeps
     for k in range(n):
         # the drive: sample, PI, limit, anti-windup (its own implementation of the documented law)
@@ -48,9 +50,10 @@ def _reference(cmd, tick_s, substeps, R, L, K, J, b, p, V_max, Kp, Ki, decouple,
         v_ff = 1j * (p * w * L * i + K * w) if decouple else 0j
         v_pi = Kp * err + z + v_ff
         mag = abs(v_pi)
-        v = v_pi * (V_max / mag) if mag > V_max else v_pi
-        z = z + Ki * tick_s * err + (v - v_pi)
-        for _ in range(substeps):
+        v_new = v_pi * (V_max / mag) if mag > V_max else v_pi
+        z = z + Ki * tick_s * err + (v_new - v_pi)
+        for sub in range(substeps):
+            v = v_old if sub < delay_substeps else v_new
             def f(i_, w_):
                 di = (v - R * i_ - 1j * p * w_ * L * i_ - 1j * K * w_) / L
                 dw = (K * i_.imag - b * w_) / J
@@ -62,6 +65,7 @@ def _reference(cmd, tick_s, substeps, R, L, K, J, b, p, V_max, Kp, Ki, decouple,
             i = i + h / 6.0 * (k1i + 2 * k2i + 2 * k3i + k4i)
             w = w + h / 6.0 * (k1w + 2 * k2w + 2 * k3w + k4w)
         out[k, 0], out[k, 1], out[k, 2] = i.imag, i.real, w
+        v_old = v_new   # what the plant sees during the next tick's delay
     return out
 
 
@@ -71,10 +75,12 @@ def reference(params, cmd, substep_s):
 
     tick = 1.0 / d.current_loop_rate
     wc = 2 * math.pi * d.current_loop_bandwidth
-    return _reference(np.asarray(cmd, float), tick, max(1, int(round(tick / substep_s))), m.phase_resistance,
+    substeps = max(1, int(round(tick / substep_s)))
+    return _reference(np.asarray(cmd, float), tick, substeps, m.phase_resistance,
                       m.q_inductance, m.torque_constant_q, m.rotor_inertia, m.viscous_damping, m.pole_pairs,
-                      voltage_limit_q(d.bus_voltage, m.winding), wc * m.q_inductance, wc * m.phase_resistance,
-                      bool(d.decoupling_enabled), d.current_limit)
+                      voltage_limit_q(d.bus_voltage, m.winding) * d.modulation_limit, wc * m.q_inductance,
+                      wc * m.phase_resistance, bool(d.decoupling_enabled), d.current_limit,
+                      int(round(d.current_loop_delay / tick * substeps)))
 
 
 def kernel(params, cmd):

@@ -113,3 +113,11 @@ def derate_scale(winding_temperature, derate_temperature, trip_temperature):
     at ``trip_temperature`` [°C] (where the drive trips and latches)."""
     x = (trip_temperature - winding_temperature) / (trip_temperature - derate_temperature)
     return np.minimum(np.maximum(x, 0.0), 1.0)
+
+
+# -- magnetic saturation ----------------------------------------------------------------------------
+
+def saturation_factor(i_q, k_sat):
+    """K(i_q)/K = max(0.2, 1 - k_sat |i_q|): cross-saturation of the magnet flux by the q-axis current [A]
+    (``k_sat`` [1/A]); the same factor scales torque and back-EMF, so the energy exchange stays consistent."""
+    return np.maximum(1.0 - k_sat * np.abs(i_q), 0.2)

@@ -45,11 +45,11 @@ _COEF_SCALARS = (
     "pole_pairs", "R_ref", "L", "K_ref", "J", "b", "T_ref", "alpha", "beta", "N", "V_bus", "V_max", "I_lim",
     "T_c", "Kp", "Ki", "decouple", "T_derate", "T_trip", "T_amb", "R_wh", "R_ha", "C_w", "C_h",
     "tau_c", "tau_asym", "tau_s", "omega_s", "cog_order", "load0", "load_g", "load_phi", "load_k", "load_k0",
-    "has_alpha", "has_beta", "has_stribeck", "has_friction", "has_position_load",
+    "has_alpha", "has_beta", "has_stribeck", "has_friction", "has_position_load", "k_sat",
 )
 COEF_DTYPE = np.dtype(
     [(name, np.float64) for name in _COEF_SCALARS]
-    + [("tick_ns", np.int64), ("n_cog", np.int64),
+    + [("tick_ns", np.int64), ("delay_ns", np.int64), ("n_cog", np.int64),
        ("cog_cos", np.float64, (MAX_COGGING_HARMONICS,)), ("cog_sin", np.float64, (MAX_COGGING_HARMONICS,)),
        ("th_tick", np.float64, (9,))],
     align=True,
@@ -57,7 +57,7 @@ COEF_DTYPE = np.dtype(
 STATE_DTYPE = np.dtype([
     ("t_ns", np.int64), ("i", np.complex128), ("omega", np.float64), ("acc", np.float64),
     ("theta", np.float64), ("T_w", np.float64), ("T_h", np.float64), ("v", np.complex128),
-    ("z", np.complex128), ("i_ref", np.float64), ("tripped", np.bool_), ("cmd_q", np.float64),
+    ("z", np.complex128), ("v_next", np.complex128), ("i_ref", np.float64), ("tripped", np.bool_), ("cmd_q", np.float64),
     ("v_mode", np.bool_), ("v_cmd", np.complex128), ("tau_ext_out", np.float64),
     ("e_in", np.float64), ("e_joule", np.float64), ("e_visc", np.float64), ("e_fric", np.float64),
     ("e_load", np.float64), ("e_amb", np.float64), ("e_disc", np.float64),
@@ -106,6 +106,7 @@ _position_load_torque_out = jit(effects.position_load_torque_out)
 _resistance_at = jit(effects.resistance_at)
 _flux_factor = jit(effects.flux_factor)
 _derate_scale = jit(effects.derate_scale)
+_saturation_factor = jit(effects.saturation_factor)
 
 
 # -- thermal network ------------------------------------------------------------------------------------
@@ -156,13 +157,16 @@ def current_limit(c, s):
 
 @jit
 def control_tick(c, s):
-    """One execution of the discrete d/q PI current controller; sets the voltage held until the next tick.
+    """One execution of the discrete d/q PI current controller: the voltage ``s.v_next`` it computes from the
+    sample is applied ``c.delay_ns`` later (at once without a computation delay) and held until the next one.
     Thermal protection first: the trip latches at ``T_trip``. In voltage mode (``s.v_mode``) the PI is
     bypassed and the commanded voltage is applied (limited to the inverter's circle)."""
     if s.v_mode:
         mag = abs(s.v_cmd)
-        s.v = s.v_cmd * (c.V_max / mag) if mag > c.V_max else s.v_cmd
+        s.v_next = s.v_cmd * (c.V_max / mag) if mag > c.V_max else s.v_cmd
         s.i_ref = 0.0
+        if c.delay_ns == 0:
+            s.v = s.v_next
         return
     s.tripped = s.tripped or s.T_w >= c.T_trip
     lim = current_limit(c, s)
@@ -174,7 +178,9 @@ def control_tick(c, s):
     v_pi = c.Kp * err + s.z + v_ff
     mag = abs(v_pi)
     v = v_pi * (c.V_max / mag) if mag > c.V_max else v_pi
-    s.v = v
+    s.v_next = v                                               # applied after the computation delay
+    if c.delay_ns == 0:
+        s.v = v
     s.z = s.z + c.Ki * c.T_c * err + (v - v_pi)               # back-calculation anti-windup
 
 
@@ -227,6 +233,8 @@ def advance(c, s, h_ns):
     i0, w0, th0, v = s.i, s.omega, s.theta, s.v
     R = _resistance_at(c.R_ref, s.T_w, c.T_ref, c.alpha, True) if c.has_alpha != 0.0 else c.R_ref
     K = c.K_ref * _flux_factor(s.T_h, c.T_ref, c.beta, True) if c.has_beta != 0.0 else c.K_ref  # magnet at T_h
+    if c.k_sat != 0.0:   # cross-saturation by the q current at the interval start: torque and back-EMF alike
+        K = K * _saturation_factor(i0.imag, c.k_sat)
     L, J = c.L, c.J
     # electrical: L di/dt = v - (R + j p w0 L) i - j K ω(t), with the speed ramping linearly over the
     # interval, ω(t) = w0 + r t, r = 2 (w - w0)/h (w = mean speed, found below). Exact solution:
@@ -312,13 +320,20 @@ def advance(c, s, h_ns):
 @jit
 def step(c, s, dt_ns):
     """Advance ``dt_ns``: the controller ticks at multiples of its period; intervals split where asked."""
-    tick = c.tick_ns
+    tick, delay = c.tick_ns, c.delay_ns
     end = s.t_ns + dt_ns
     while s.t_ns < end:
         phase = s.t_ns % tick
         if phase == 0:
+            if delay == tick:          # a whole period of delay: the previous tick's voltage starts now
+                s.v = s.v_next
             control_tick(c, s)
-        advance(c, s, min(tick - phase, end - s.t_ns))
+        elif phase == delay:           # the computed voltage reaches the inverter
+            s.v = s.v_next
+        nxt = tick - phase
+        if 0 < delay < tick and phase < delay:
+            nxt = delay - phase
+        advance(c, s, min(nxt, end - s.t_ns))
 
 
 @jit

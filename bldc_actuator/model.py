@@ -123,12 +123,16 @@ class _Coeffs:
         self.V_bus = d("bus_voltage")
         wind = [p.motor.winding for p in plist]
         self.V_max = (np.array([frames.voltage_limit_q(v, w) for v, w in zip(np.atleast_1d(self.V_bus), wind)])
-                      if batch else frames.voltage_limit_q(self.V_bus, wind[0]))
+                      if batch else frames.voltage_limit_q(self.V_bus, wind[0])) * d("modulation_limit")
         self.I_lim = d("current_limit")
         rates = {p.drive.current_loop_rate for p in plist}
         if len(rates) != 1:
             raise ValueError("drive.current_loop_rate must be the same for every actuator of a batch")
         self.tick_ns = int(round(1e9 / rates.pop()))
+        delays = {int(round(p.drive.current_loop_delay * 1e9)) for p in plist}
+        if len(delays) != 1:
+            raise ValueError("drive.current_loop_delay must be the same for every actuator of a batch")
+        self.delay_ns = min(delays.pop(), self.tick_ns)
         self.T_c = self.tick_ns * 1e-9
         w_c = TWO_PI * d("current_loop_bandwidth")
         self.Kp = w_c * self.L
@@ -163,6 +167,7 @@ class _Coeffs:
         self.load_k = ld("spring_stiffness")
         self.load_k0 = ld("spring_zero")
         self.has_position_load = bool(np.any(self.load_g) or np.any(self.load_k))
+        self.k_sat = e("kt_saturation")
         self.n_cog = len(self.cog_cos)
         if self.n_cog > kernel.MAX_COGGING_HARMONICS:
             raise ValueError(f"effects.cogging_cos: at most {kernel.MAX_COGGING_HARMONICS} harmonics, "
@@ -174,6 +179,7 @@ class _Coeffs:
         for name in kernel._COEF_SCALARS:  # noqa: SLF001 - the layout belongs to the kernel
             cs[name] = np.broadcast_to(np.asarray(getattr(self, name), dtype=float), (n,))
         cs["tick_ns"] = self.tick_ns
+        cs["delay_ns"] = self.delay_ns
         cs["n_cog"] = self.n_cog
         for k in range(self.n_cog):
             cs["cog_cos"][:, k] = self.cog_cos[k]
@@ -428,6 +434,7 @@ class Actuator(_Base):
         s("T_w", float(st.T_winding))
         s("T_h", float(st.T_housing))
         s("v", complex(st.v_d, st.v_q))
+        s("v_next", complex(st.v_d, st.v_q))
         s("z", complex(st.z_d, st.z_q))
         s("i_ref", float(st.i_q_ref))
         s("tripped", bool(st.tripped))
@@ -446,7 +453,7 @@ class Actuator(_Base):
 def _outputs(c: _Coeffs, s, winding, ops) -> dict[str, Any]:
     i_d, i_q = s.i.real, s.i.imag
     v_d, v_q = s.v.real, s.v.imag
-    K = c.K_ref * effects.flux_factor(s.T_h, c.T_ref, c.beta)
+    K = c.K_ref * effects.flux_factor(s.T_h, c.T_ref, c.beta) * effects.saturation_factor(s.i.imag, c.k_sat)
     theta_e = c.pole_pairs * s.theta
     i_a, i_b, i_c = frames.dq_to_abc(i_d, i_q, theta_e)
     i_A, i_B, i_C = frames.phase_to_line_current(i_a, i_b, i_c, winding)
@@ -503,6 +510,7 @@ class BatchActuator(_Base):
         s("T_w", arr(T_winding))
         s("T_h", arr(T_housing))
         s("v", arr(v_d) + 1j * arr(v_q))
+        s("v_next", arr(v_d) + 1j * arr(v_q))
         s("z", arr(z_d) + 1j * arr(z_q))
         s("i_ref", arr(i_q_ref))
         s("cmd_q", arr(i_q_ref))

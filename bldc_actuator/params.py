@@ -88,6 +88,11 @@ class DriveParams:
                                    "fall linearly", -40.0, 300.0, runtime=True)
     trip_temperature: float = _p(120.0, "degC", "winding temperature where the drive trips (zero current, "
                                  "latched until reset)", -40.0, 300.0, runtime=True)
+    modulation_limit: float = _p(1.0, "1", "m: |v_dq| <= m x the SVPWM limit of the winding (a drive's duty cap, "
+                                 "e.g. 0.9); 1 = full SVPWM", 0.0, 1.0, lo_open=True)
+    current_loop_delay: float = _p(0.0, "s", "computation delay: the voltage computed from the sample at a "
+                                   "controller tick is applied this long after it (0 .. one loop period)",
+                                   0.0, 1e-3)
 
 
 @dataclass(frozen=True)
@@ -129,6 +134,8 @@ class EffectsParams:
                             0, 10000)
     cogging_cos: tuple = _p((), "N*m", "a_k: cosine amplitudes of harmonics k = 1..n of N_c theta")
     cogging_sin: tuple = _p((), "N*m", "b_k: sine amplitudes of harmonics k = 1..n of N_c theta")
+    kt_saturation: float = _p(0.0, "1/A", "k_sat: magnetic saturation, K(i_q) = K (1 - k_sat |i_q|) (floored at "
+                              "0.2 K) in torque and back-EMF alike", 0.0, 1.0)
 
 
 @dataclass(frozen=True)
@@ -280,6 +287,10 @@ def validate(params: ActuatorParams) -> None:
     if d.trip_temperature <= d.derate_temperature:
         raise ParameterError("drive.trip_temperature", f"must be above drive.derate_temperature "
                              f"({d.derate_temperature:g} degC), got {d.trip_temperature:g} degC")
+    if d.current_loop_delay > 1.0 / d.current_loop_rate * (1 + 1e-9):
+        raise ParameterError("drive.current_loop_delay",
+                             f"{d.current_loop_delay:g} s is longer than one loop period "
+                             f"({1.0 / d.current_loop_rate:g} s at {d.current_loop_rate:g} Hz); expected 0 .. one period")
     if d.current_loop_bandwidth * 2 * math.pi / d.current_loop_rate > 1.0:
         raise ParameterError("drive.current_loop_bandwidth",
                              f"{d.current_loop_bandwidth:g} Hz is too fast for a {d.current_loop_rate:g} Hz loop "

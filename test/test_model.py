@@ -401,3 +401,45 @@ def test_public_thermal_matrices_match_expm():
     assert np.allclose([[p11, p12], [p21, p22]], expm(3.0 * A), rtol=1e-12)
     G = np.linalg.solve(A, (expm(3.0 * A) - np.eye(2)) @ np.array([1 / th.winding_heat_capacity, 0.0]))
     assert np.allclose([G1, G2], G, rtol=1e-10)
+
+
+def test_modulation_limit_scales_the_voltage_circle():
+    """drive.modulation_limit m: |v_dq| <= m x the SVPWM limit. The same run with m = 0.8 equals the run with a
+    bus at 0.8 x V_bus (the only other way to get that circle), and the no-load speed falls by that factor."""
+    base = ActuatorParams()
+    runs = []
+    for p in (base.replace(**{"drive.modulation_limit": 0.8}),
+              base.replace(**{"drive.bus_voltage": 0.8 * base.drive.bus_voltage}),
+              base):
+        act = Actuator(p)
+        act.set_current_command(5.0)
+        act.step(0.6)
+        runs.append((act.state, act.outputs()))
+    (s_m, o_m), (s_b, o_b), (s_1, o_1) = runs
+    assert o_m["v_limit_q"] == pytest.approx(0.8 * o_1["v_limit_q"], rel=1e-15)
+    assert s_m.omega == pytest.approx(s_b.omega, rel=1e-12) and s_m.i_q == pytest.approx(s_b.i_q, rel=1e-9, abs=1e-12)
+    assert o_m["voltage_saturated"] and o_1["voltage_saturated"]
+    assert s_m.omega / s_1.omega == pytest.approx(0.8, rel=0.02)
+
+
+def test_kt_saturation_steady_torque_balance_and_energy():
+    """effects.kt_saturation k: K(i_q) = K (1 - k |i_q|) in torque and back-EMF. At a constant current with
+    only viscous damping the steady speed is K (1 - k i) i / b (analytic), and the energy ledger still closes."""
+    k, i_cmd = 0.02, 6.0
+    p = ActuatorParams().replace(**{"effects.kt_saturation": k, "motor.viscous_damping": 2e-2,
+                                    "motor.resistance_temperature_enabled": False})
+    act = Actuator(p)
+    e0 = act.energy
+    act.set_current_command(i_cmd)
+    act.step(1.0)
+    K, b = p.motor.torque_constant_q, p.motor.viscous_damping
+    assert act.state.i_q == pytest.approx(i_cmd, rel=1e-6)
+    assert act.state.omega == pytest.approx(K * (1 - k * i_cmd) * i_cmd / b, rel=1e-6)
+    assert act.outputs()["torque_em"] == pytest.approx(K * (1 - k * i_cmd) * i_cmd, rel=1e-6)
+    e1 = act.energy
+    assert abs(e1.residual(e0)) < 1e-6 * e1.electrical_in
+    # and not a no-op: without saturation the rotor turns faster by 1 / (1 - k i)
+    plain = Actuator(p.replace(**{"effects.kt_saturation": 0.0}))
+    plain.set_current_command(i_cmd)
+    plain.step(1.0)
+    assert plain.state.omega / act.state.omega == pytest.approx(1 / (1 - k * i_cmd), rel=1e-6)

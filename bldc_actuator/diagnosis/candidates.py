@@ -427,6 +427,24 @@ def params_generic(names_units_fields):
     return f
 
 
+def params_saturation(coef, cov, keys, variant, ctx):
+    """The coefficient of the K i|i| column is the torque lost per K i|i|: the simulator's effects.kt_saturation
+    (K(i) = K (1 - k |i|)); a negative value (torque rising with current) has no simulator term."""
+    c = float(coef[0])
+    return {"kt_saturation": {"value": c, "sd": _sd(cov, 0), "unit": "1/A",
+                              "field": "effects.kt_saturation" if c > 0 else None, "delta": c}}
+
+
+def params_delay(coef, cov, keys, variant, ctx):
+    """The dv/dt column's coefficient is the delay d [s] (v(t - d) = v - d dv/dt): drive.current_loop_delay,
+    which the simulator takes up to one loop period."""
+    d = float(coef[0])
+    period = 1.0 / ctx.params.drive.current_loop_rate
+    fits = 0.0 <= d <= period
+    return {"delay": {"value": d, "sd": _sd(cov, 0), "unit": "s", "field": "drive.current_loop_delay" if fits else None,
+                      "delta": d}}
+
+
 def _flat(field_name):
     return lambda p: p.to_flat()[field_name]
 
@@ -608,10 +626,9 @@ def library() -> dict[str, Candidate]:
                          "back-EMF"},
                   v_single("magnet_temperature", {"magnet": col_magnet}), excite_temperature, params_magnet))
     add(Candidate("magnetic_saturation", ("mechanical",), mech_needs,
-                  "magnetic saturation: torque per amp falls at high current", False,
+                  "magnetic saturation: torque per amp falls at high current", True,
                   {"torque_constant_error": "steps to several current levels: saturation only bends the top"},
-                  v_single("magnetic_saturation", {"sat": col_saturation}), excite_saturation,
-                  params_generic({"sat": ("saturation_coefficient", "1/A", None, None)})))
+                  v_single("magnetic_saturation", {"sat": col_saturation}), excite_saturation, params_saturation))
     add(Candidate("voltage_saturation", ("tracking",), ("current", "current_command|torque_command", "velocity|position"),
                   "the inverter cannot apply the voltage the model allows near the limit (bus sag, modulation "
                   "limit): the current stops following its command early", False,
@@ -624,10 +641,9 @@ def library() -> dict[str, Candidate]:
                   v_single("dead_time", {"dead": col_dead_time}), excite_dead_time,
                   params_generic({"dead": ("dead_time_voltage", "V", None, None)})))
     add(Candidate("current_loop_delay", ("electrical",), ("voltage_q", "current", "velocity|position"),
-                  "the recorded voltage leads the current by a delay (PWM / computation delay)", False,
+                  "the recorded voltage leads the current by a delay (PWM / computation delay)", True,
                   {"inductance_error": "current steps recorded at a higher rate than the current loop"},
-                  v_single("current_loop_delay", {"delay": col_delay}), None,
-                  params_generic({"delay": ("delay", "s", None, None)})))
+                  v_single("current_loop_delay", {"delay": col_delay}), None, params_delay))
     add(Candidate("thermal_parameters", ("thermal",), ("current", "winding_temperature|housing_temperature"),
                   "the thermal network (R_wh, R_ha, C_w, C_h) is off", True,
                   {"iron_loss": "hold current at standstill (no iron loss) and spin at high speed with no current"},

@@ -489,7 +489,7 @@ def apply_thermal(params: ActuatorParams, thermal: dict[str, Any]):
     notes, not_sim = [], []
     flat = {}
     for f in thermal["findings"]:
-        if f["effect"] == "thermal_parameters":
+        if f["effect"] in ("thermal_parameters", "voltage_saturation") and f.get("simulated"):
             for name, fld in f["fields"].items():
                 spec = SPECS[fld]
                 lo, hi = spec.range
@@ -626,7 +626,8 @@ def voltage_saturation_check(ctx: Context, lib: dict[str, Candidate], gate, want
     out["findings"].append({
         "effect": cand.name, "description": cand.description, "form": "current tracking vs voltage limit",
         "parameters": {"voltage_limit_ratio": c_hat}, "uncertainty": {"voltage_limit_ratio": sd},
-        "units": {"voltage_limit_ratio": ""}, "fields": {}, "simulated": False, "evidence": ev,
+        "units": {"voltage_limit_ratio": ""}, "fields": {"voltage_limit_ratio": "drive.modulation_limit"},
+        "simulated": True, "evidence": ev,
         "held_out": {"metric": "current-tracking error RMS (held-out)", "unit": "A", "before": e0, "after": e1},
         "metrics": [{"metric": "current-tracking error RMS (held-out)", "unit": "A", "before": e0, "after": e1}],
         "delta_bic": dbic, "round": 1, "correlations": []})
