@@ -32,7 +32,7 @@ except ImportError:  # pragma: no cover
         return (lambda f: f) if not a or not callable(a[0]) else a[0]
 
 
-@njit(cache=True)
+@njit(cache=False)   # also imported by file path from the tests (numba caches need an importable module)
 def _reference(cmd, tick_s, substeps, R, L, K, J, b, p, V_max, Kp, Ki, decouple, I_lim, delay_substeps):
     """RK4 of the continuous plant between controller ticks; returns i_q, i_d, ω at every tick. The voltage
     computed at a tick reaches the plant ``delay_substeps`` substeps later (a computation delay)."""

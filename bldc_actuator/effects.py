@@ -121,3 +121,22 @@ def saturation_factor(i_q, k_sat):
     """K(i_q)/K = max(0.2, 1 - k_sat |i_q|): cross-saturation of the magnet flux by the q-axis current [A]
     (``k_sat`` [1/A]); the same factor scales torque and back-EMF, so the energy exchange stays consistent."""
     return np.maximum(1.0 - k_sat * np.abs(i_q), 0.2)
+
+
+# -- iron loss -------------------------------------------------------------------------------------
+
+def iron_loss_power(omega, hysteresis, eddy):
+    """Iron loss [W] at rotor speed ω [rad/s]: hysteresis ``τ_h |ω|`` + eddy currents ``c_e ω²``; the drag torque
+    is ``τ_h sign(ω) + c_e ω`` (the simulator adds it to friction and damping) and the power heats the stator."""
+    return hysteresis * np.abs(omega) + eddy * omega * omega
+
+
+# -- current sensors -------------------------------------------------------------------------------
+
+def phase_current_measurement(i_a, i_b, offset_a, offset_b, gain_a, gain_b):
+    """What a drive with two phase-current sensors measures [A]: ``a' = g_a a + o_a``, ``b' = g_b b + o_b``,
+    ``c' = -(a' + b')``. Its controller transforms these to d-q: an offset gives ripple at the electrical
+    frequency, a gain mismatch at twice it."""
+    a_m = gain_a * i_a + offset_a
+    b_m = gain_b * i_b + offset_b
+    return a_m, b_m, -(a_m + b_m)

@@ -18,7 +18,7 @@ import os
 
 import numpy as np
 
-from . import effects
+from . import effects, frames
 
 try:  # pragma: no cover - exercised by the numba / no-numba CI runs
     import numba as _numba
@@ -46,6 +46,7 @@ _COEF_SCALARS = (
     "T_c", "Kp", "Ki", "decouple", "T_derate", "T_trip", "T_amb", "R_wh", "R_ha", "C_w", "C_h",
     "tau_c", "tau_asym", "tau_s", "omega_s", "cog_order", "load0", "load_g", "load_phi", "load_k", "load_k0",
     "has_alpha", "has_beta", "has_stribeck", "has_friction", "has_position_load", "k_sat",
+    "fe_h", "fe_e", "sens_off_a", "sens_off_b", "sens_gain_a", "sens_gain_b", "has_sensor_error",
 )
 COEF_DTYPE = np.dtype(
     [(name, np.float64) for name in _COEF_SCALARS]
@@ -60,7 +61,7 @@ STATE_DTYPE = np.dtype([
     ("z", np.complex128), ("v_next", np.complex128), ("i_ref", np.float64), ("tripped", np.bool_), ("cmd_q", np.float64),
     ("v_mode", np.bool_), ("v_cmd", np.complex128), ("tau_ext_out", np.float64),
     ("e_in", np.float64), ("e_joule", np.float64), ("e_visc", np.float64), ("e_fric", np.float64),
-    ("e_load", np.float64), ("e_amb", np.float64), ("e_disc", np.float64),
+    ("e_load", np.float64), ("e_amb", np.float64), ("e_disc", np.float64), ("e_iron", np.float64),
 ], align=True)
 
 
@@ -107,6 +108,10 @@ _resistance_at = jit(effects.resistance_at)
 _flux_factor = jit(effects.flux_factor)
 _derate_scale = jit(effects.derate_scale)
 _saturation_factor = jit(effects.saturation_factor)
+_iron_loss_power = jit(effects.iron_loss_power)
+_phase_current_measurement = jit(effects.phase_current_measurement)
+_dq_to_abc = jit(frames.dq_to_abc)
+_abc_to_dq = jit(frames.abc_to_dq)
 
 
 # -- thermal network ------------------------------------------------------------------------------------
@@ -148,6 +153,15 @@ def _sign(x):
 
 
 @jit
+def measured_current_dq(i_d, i_q, theta_e, off_a, off_b, gain_a, gain_b):
+    """The d-q current the drive's controller sees [A]: the true phase currents through the two sensors
+    (:func:`effects.phase_current_measurement`), transformed with the rotor angle ``theta_e`` [rad]."""
+    a, b, _ = _dq_to_abc(i_d, i_q, theta_e)
+    a_m, b_m, c_m = _phase_current_measurement(a, b, off_a, off_b, gain_a, gain_b)
+    return _abc_to_dq(a_m, b_m, c_m, theta_e)
+
+
+@jit
 def current_limit(c, s):
     """Effective current limit [A] for the present winding temperature and trip state (no state change)."""
     if s.tripped:
@@ -171,10 +185,15 @@ def control_tick(c, s):
     s.tripped = s.tripped or s.T_w >= c.T_trip
     lim = current_limit(c, s)
     s.i_ref = min(max(s.cmd_q, -lim), lim)
-    err = 1j * s.i_ref - s.i                                   # i_d_ref = 0
+    i = s.i
+    if c.has_sensor_error != 0.0:   # the controller acts on what its sensors measure
+        d_m, q_m = measured_current_dq(i.real, i.imag, c.pole_pairs * s.theta, c.sens_off_a, c.sens_off_b,
+                                       c.sens_gain_a, c.sens_gain_b)
+        i = d_m + 1j * q_m
+    err = 1j * s.i_ref - i                                     # i_d_ref = 0
     v_ff = 0j
     if c.decouple != 0.0:
-        v_ff = 1j * (c.pole_pairs * s.omega * c.L * s.i + c.K_ref * s.omega)
+        v_ff = 1j * (c.pole_pairs * s.omega * c.L * i + c.K_ref * s.omega)
     v_pi = c.Kp * err + s.z + v_ff
     mag = abs(v_pi)
     v = v_pi * (c.V_max / mag) if mag > c.V_max else v_pi
@@ -199,11 +218,12 @@ def friction(c, num, den, w0, h):
     """
     J2h = 2.0 * c.J / h                       # den = J2h + (b - K B); num = J2h w0 + drive(0)
     d0 = _sign(w0)
-    F_mov = _friction_magnitude(d0, abs(w0), c.tau_c, c.tau_asym, c.tau_s, c.omega_s)
+    tau_c = c.tau_c + c.fe_h                  # iron-loss hysteresis drag acts like dry friction
+    F_mov = _friction_magnitude(d0, abs(w0), tau_c, c.tau_asym, c.tau_s, c.omega_s)
     if c.has_stribeck != 0.0:
         w_pred = (num - d0 * F_mov) / den
         w_eval = w_pred if w_pred * w0 > 0.0 else 0.5 * w0
-        F_mov = _friction_magnitude(d0, abs(w_eval), c.tau_c, c.tau_asym, c.tau_s, c.omega_s)
+        F_mov = _friction_magnitude(d0, abs(w_eval), tau_c, c.tau_asym, c.tau_s, c.omega_s)
     w_mov = (num - d0 * F_mov) / den
     crossed = w0 * (2.0 * w_mov - w0) < 0.0 and F_mov > 0.0
     moving = w0 != 0.0
@@ -212,7 +232,7 @@ def friction(c, num, den, w0, h):
     # drive torque (everything but friction and inertia) at the crossing, w ~ 0
     drive = num - J2h * w0
     push = _sign(drive)
-    F_st = _friction_magnitude(push, 0.0, c.tau_c, c.tau_asym, c.tau_s, c.omega_s)
+    F_st = _friction_magnitude(push, 0.0, tau_c, c.tau_asym, c.tau_s, c.omega_s)
     breaks = abs(drive) > F_st
     if moving:
         if crossed and breaks and push == -d0:
@@ -263,7 +283,8 @@ def advance(c, s, h_ns):
         tau_other = tau_other + _cogging_torque_mean(th0, h * w0, c.cog_order, c.cog_cos[:c.n_cog],
                                                      c.cog_sin[:c.n_cog])
     # mechanical, implicit midpoint: J (w1 - w0)/h = K (A + B w) - b w - tau_other - tau_f, w = (w0 + w1)/2
-    den = 2.0 * J / h + c.b - K * B
+    b = c.b + c.fe_e                             # viscous damping + eddy-current iron-loss drag
+    den = 2.0 * J / h + b - K * B
     num = 2.0 * J * w0 / h + K * A - tau_other
     if c.has_friction != 0.0:
         w, tau_f = friction(c, num, den, w0, h)
@@ -294,7 +315,8 @@ def advance(c, s, h_ns):
         p11, p12, p21, p22, G1, G2, i21, i22, g1 = th[0], th[1], th[2], th[3], th[4], th[5], th[6], th[7], th[8]
     else:
         p11, p12, p21, p22, G1, G2, i21, i22, g1 = _thermal_matrices(c.R_wh, c.R_ha, c.C_w, c.C_h, h)
-    P = joule / h
+    P_fe = _iron_loss_power(w, c.fe_h, c.fe_e) if (c.fe_h != 0.0 or c.fe_e != 0.0) else 0.0
+    P = joule / h + P_fe                         # heat into the winding node
     y1, y2 = s.T_w - c.T_amb, s.T_h - c.T_amb
     n1 = p11 * y1 + p12 * y2 + G1 * P
     n2 = p21 * y1 + p22 * y2 + G2 * P
@@ -302,7 +324,8 @@ def advance(c, s, h_ns):
     # ledger
     s.e_in = s.e_in + (v.conjugate() * i_mean).real * h
     s.e_joule = s.e_joule + joule
-    s.e_visc = s.e_visc + c.b * w * w * h
+    s.e_visc = s.e_visc + b * w * w * h
+    s.e_iron = s.e_iron + P_fe * h
     s.e_fric = s.e_fric + tau_f * dth
     s.e_load = s.e_load + tau_other * dth
     s.e_amb = s.e_amb + int_y2 / c.R_ha

@@ -152,7 +152,14 @@ class _Coeffs:
         self.tau_s = e("stribeck_friction")
         self.omega_s = e("stribeck_velocity")
         self.has_stribeck = bool(np.any(self.tau_s))
-        self.has_friction = bool(np.any(self.tau_c) or np.any(self.tau_asym) or np.any(self.tau_s))
+        self.fe_h = e("iron_loss_hysteresis")
+        self.fe_e = e("iron_loss_eddy")
+        self.has_friction = bool(np.any(self.tau_c) or np.any(self.tau_asym) or np.any(self.tau_s)
+                                 or np.any(self.fe_h))
+        self.sens_off_a, self.sens_off_b = d("current_sensor_offset_a"), d("current_sensor_offset_b")
+        self.sens_gain_a, self.sens_gain_b = d("current_sensor_gain_a"), d("current_sensor_gain_b")
+        self.has_sensor_error = bool(np.any(self.sens_off_a) or np.any(self.sens_off_b)
+                                     or np.any(self.sens_gain_a != 1.0) or np.any(self.sens_gain_b != 1.0))
         self.cog_order = e("cogging_order")
         n_h = max(len(p.effects.cogging_cos) for p in plist)
         pad = lambda seq: list(seq) + [0.0] * (n_h - len(seq))  # noqa: E731
@@ -244,6 +251,8 @@ class EnergyLedger:
     friction: float = 0.0           #: ∫ τ_f ω dt
     load: float = 0.0               #: work done on the external load and cogging ∫ (τ_load/N + τ_cog) ω dt
     heat_to_ambient: float = 0.0    #: ∫ (T_h - T_a)/R_ha dt
+    iron_heat: float = 0.0          #: ∫ (τ_h |ω| + c_e ω²) dt: iron loss into the winding node (its drag work is
+    #: in ``friction`` and ``viscous``)
     thermal: float = 0.0            #: C_w (T_w - T_w0) + C_h (T_h - T_h0)
     #: ∫ K ω(t) i_q dt (electrical side) minus the work of the interval-mean torque (mechanical side):
     #: the integrator's own energy error, O(h³) per interval. Reported, never subtracted in residual().
@@ -255,8 +264,8 @@ class EnergyLedger:
                 - (self.kinetic - initial.kinetic) - self.viscous - self.friction - self.load)
 
     def thermal_residual(self) -> float:
-        """Joule heat minus (heat stored + heat to ambient) [J]."""
-        return self.joule - self.thermal - self.heat_to_ambient
+        """Joule heat + iron-loss heat minus (heat stored + heat to ambient) [J]."""
+        return self.joule + self.iron_heat - self.thermal - self.heat_to_ambient
 
 
 # -- public classes ------------------------------------------------------------------------------------
@@ -333,7 +342,7 @@ class _Base:
         c, g = self._c, self._get
         return dict(electrical_in=g("e_in"), joule=g("e_joule"), magnetic=0.5 * c.L * abs(g("i")) ** 2,
                     kinetic=0.5 * c.J * g("omega") ** 2, viscous=g("e_visc"), friction=g("e_fric"),
-                    load=g("e_load"), heat_to_ambient=g("e_amb"), discretization=g("e_disc"),
+                    load=g("e_load"), heat_to_ambient=g("e_amb"), discretization=g("e_disc"), iron_heat=g("e_iron"),
                     thermal=c.C_w * (g("T_w") - self._T0[0]) + c.C_h * (g("T_h") - self._T0[1]))
 
     def _torque_to_current(self, tau_out):
@@ -458,6 +467,12 @@ def _outputs(c: _Coeffs, s, winding, ops) -> dict[str, Any]:
     i_a, i_b, i_c = frames.dq_to_abc(i_d, i_q, theta_e)
     i_A, i_B, i_C = frames.phase_to_line_current(i_a, i_b, i_c, winding)
     v_mag = abs(s.v)
+    i_meas = (i_d, i_q)
+    if c.has_sensor_error:
+        i_meas = (np.vectorize(kernel.measured_current_dq)(i_d, i_q, theta_e, c.sens_off_a, c.sens_off_b,
+                                                           c.sens_gain_a, c.sens_gain_b)
+                  if c.batch else kernel.measured_current_dq(i_d, i_q, theta_e, c.sens_off_a, c.sens_off_b,
+                                                             c.sens_gain_a, c.sens_gain_b))
     return {
         "t": s.t_ns * 1e-9,
         "i_d": i_d, "i_q": i_q, "i_q_ref": s.i_ref, "v_d": v_d, "v_q": v_q,
@@ -471,6 +486,7 @@ def _outputs(c: _Coeffs, s, winding, ops) -> dict[str, Any]:
         "T_winding": s.T_w, "T_housing": s.T_h,
         "resistance_phase": effects.resistance_at(c.R_ref, s.T_w, c.T_ref, c.alpha),
         "joule_power": effects.resistance_at(c.R_ref, s.T_w, c.T_ref, c.alpha) * abs(s.i) ** 2,
+        "i_d_measured": i_meas[0], "i_q_measured": i_meas[1],
         "current_limit_effective": ops.where(s.tripped, 0.0,
                                              c.I_lim * effects.derate_scale(s.T_w, c.T_derate, c.T_trip)),
         "tripped": s.tripped,

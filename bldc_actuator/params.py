@@ -90,6 +90,13 @@ class DriveParams:
                                  "latched until reset)", -40.0, 300.0, runtime=True)
     modulation_limit: float = _p(1.0, "1", "m: |v_dq| <= m x the SVPWM limit of the winding (a drive's duty cap, "
                                  "e.g. 0.9); 1 = full SVPWM", 0.0, 1.0, lo_open=True)
+    current_sensor_offset_a: float = _p(0.0, "A", "offset of the phase-a current sensor (the controller acts on "
+                                        "the measured current: ripple at the electrical frequency)", -100.0, 100.0)
+    current_sensor_offset_b: float = _p(0.0, "A", "offset of the phase-b current sensor (c = -(a + b))",
+                                        -100.0, 100.0)
+    current_sensor_gain_a: float = _p(1.0, "1", "gain of the phase-a current sensor (a mismatch between the "
+                                      "phases gives ripple at twice the electrical frequency)", 0.5, 1.5)
+    current_sensor_gain_b: float = _p(1.0, "1", "gain of the phase-b current sensor", 0.5, 1.5)
     current_loop_delay: float = _p(0.0, "s", "computation delay: the voltage computed from the sample at a "
                                    "controller tick is applied this long after it (0 .. one loop period)",
                                    0.0, 1e-3)
@@ -134,6 +141,10 @@ class EffectsParams:
                             0, 10000)
     cogging_cos: tuple = _p((), "N*m", "a_k: cosine amplitudes of harmonics k = 1..n of N_c theta")
     cogging_sin: tuple = _p((), "N*m", "b_k: sine amplitudes of harmonics k = 1..n of N_c theta")
+    iron_loss_hysteresis: float = _p(0.0, "N*m", "tau_h: hysteresis iron-loss drag (power tau_h |omega|), "
+                                     "its heat goes into the winding node", 0.0, 100.0)
+    iron_loss_eddy: float = _p(0.0, "N*m*s/rad", "c_e: eddy-current iron-loss drag c_e omega (power c_e omega^2), "
+                               "its heat goes into the winding node", 0.0, 100.0)
     kt_saturation: float = _p(0.0, "1/A", "k_sat: magnetic saturation, K(i_q) = K (1 - k_sat |i_q|) (floored at "
                               "0.2 K) in torque and back-EMF alike", 0.0, 1.0)
 

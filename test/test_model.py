@@ -8,7 +8,7 @@ from scipy.linalg import expm
 from scipy.optimize import fsolve
 
 from bldc_actuator import frames, profiles
-from bldc_actuator.model import Actuator, BatchActuator
+from bldc_actuator.model import Actuator, ActuatorState, BatchActuator
 from bldc_actuator.params import ActuatorParams
 
 
@@ -443,3 +443,59 @@ def test_kt_saturation_steady_torque_balance_and_energy():
     plain.set_current_command(i_cmd)
     plain.step(1.0)
     assert plain.state.omega / act.state.omega == pytest.approx(1 / (1 - k * i_cmd), rel=1e-6)
+
+
+def test_iron_loss_drag_and_heat():
+    """effects.iron_loss_eddy c_e and iron_loss_hysteresis tau_h: drag c_e omega + tau_h sign(omega), and their
+    power heats the winding node. Steady speed at a constant current is (K i - tau_h) / (b + c_e) (analytic);
+    the mechanical and the thermal ledgers (iron heat included) close."""
+    i_cmd, c_e, tau_h = 4.0, 0.01, 0.05
+    p = ActuatorParams().replace(**{"effects.iron_loss_eddy": c_e, "effects.iron_loss_hysteresis": tau_h,
+                                    "motor.viscous_damping": 0.005, "motor.resistance_temperature_enabled": False})
+    act = Actuator(p)
+    e0 = act.energy
+    act.set_current_command(i_cmd)
+    act.step(2.0)
+    K, b = p.motor.torque_constant_q, p.motor.viscous_damping
+    w = (K * i_cmd - tau_h) / (b + c_e)
+    assert act.state.omega == pytest.approx(w, rel=1e-6)
+    e = act.energy
+    assert e.iron_heat == pytest.approx((tau_h * w + c_e * w * w) * 2.0, rel=0.05)   # mostly at steady speed
+    assert abs(e.residual(e0)) < 1e-6 * e.electrical_in
+    assert abs(e.thermal_residual()) < 1e-9 * (e.joule + e.iron_heat)
+    # the iron heat warms the winding beyond the Joule heat alone
+    plain = Actuator(p.replace(**{"effects.iron_loss_eddy": 0.0, "effects.iron_loss_hysteresis": 0.0,
+                                  "motor.viscous_damping": 0.005 + c_e}))
+    plain.set_current_command(i_cmd)
+    plain.step(2.0)
+    assert act.state.T_winding - plain.state.T_winding > 0.5 * e.iron_heat / p.thermal.winding_heat_capacity
+
+
+def test_current_sensor_offset_is_what_the_controller_acts_on():
+    """drive.current_sensor_offset_a o: the controller drives the MEASURED current to its reference, so the true
+    d-q current is the reference minus the offset seen in d-q at the rotor angle: abc_to_dq(o, 0, -o, theta_e)
+    (two sensors, c = -(a + b)). Rotor held (huge inertia): a constant error, checked analytically."""
+    from bldc_actuator import frames
+
+    o, i_ref = 0.3, 2.0
+    p = ActuatorParams().replace(**{"drive.current_sensor_offset_a": o, "motor.rotor_inertia": 100.0})
+    act = Actuator(p, ActuatorState(theta=0.37 / p.motor.pole_pairs))
+    act.set_current_command(i_ref)
+    act.step(0.05)
+    th = p.motor.pole_pairs * act.state.theta
+    d_err, q_err = frames.abc_to_dq(o, 0.0, -o, th)
+    assert act.state.i_d == pytest.approx(-d_err, abs=1e-6)
+    assert act.state.i_q == pytest.approx(i_ref - q_err, abs=1e-6)
+    out = act.outputs()
+    assert out["i_q_measured"] == pytest.approx(i_ref, abs=1e-6) and out["i_d_measured"] == pytest.approx(0, abs=1e-6)
+    # a gain mismatch alone (no offset) gives no error at an angle where phase b carries no current
+    g = ActuatorParams().replace(**{"drive.current_sensor_gain_b": 1.2, "motor.rotor_inertia": 100.0})
+    th0 = 2 * math.pi / 3                      # b = -sqrt(2/3) q sin(th - 2pi/3) = 0 for i_d = 0
+    act = Actuator(g, ActuatorState(theta=th0 / g.motor.pole_pairs))
+    act.set_current_command(i_ref)
+    act.step(0.05)
+    assert act.state.i_q == pytest.approx(i_ref, rel=1e-3)
+    act = Actuator(g, ActuatorState(theta=0.0))   # where phase b carries current the mismatch shows
+    act.set_current_command(i_ref)
+    act.step(0.05)
+    assert abs(act.state.i_q - i_ref) > 0.02 * i_ref

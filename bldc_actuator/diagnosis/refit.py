@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import effects
 from ..model import BatchActuator
 from ..params import SPECS, ActuatorParams, from_flat
 from .candidates import Candidate
@@ -395,7 +396,7 @@ def thermal_select(ctx: Context, names: list[str], lib: dict[str, Candidate], ga
         return p0.replace(**vals)
 
     def heat(k):
-        return abs(k[0]) * np.abs(w) + abs(k[1]) * w * w
+        return effects.iron_loss_power(w, abs(k[0]), abs(k[1]))   # the simulator's iron-loss power
 
     def stats(r, ho):
         ok = np.isfinite(r)
@@ -468,13 +469,14 @@ def thermal_select(ctx: Context, names: list[str], lib: dict[str, Candidate], ga
             pars = {"hysteresis_loss_coefficient": float(state["k"][0]), "eddy_loss_coefficient": float(state["k"][1])}
             unc = {"hysteresis_loss_coefficient": float(sd[0]), "eddy_loss_coefficient": float(sd[1])}
             units = {"hysteresis_loss_coefficient": "W*s/rad", "eddy_loss_coefficient": "W*s^2/rad^2"}
-            fields = {}
+            fields = {"hysteresis_loss_coefficient": "effects.iron_loss_hysteresis",
+                      "eddy_loss_coefficient": "effects.iron_loss_eddy"}
             out["extra_heat"] = heat(state["k"])
         state["r"], state["rss"] = best["r"], best["rss"]
         out["findings"].append({
             "effect": best["name"], "description": lib[best["name"]].description, "form": "thermal output error",
             "parameters": pars, "uncertainty": unc, "units": units, "fields": fields,
-            "simulated": best["name"] == "thermal_parameters",
+            "simulated": True,
             "evidence": [f"temperature simulated from the measured current misses the recording by "
                          f"{best['e0']:.2f} K RMS on held-out data", best["reason"]],
             "held_out": {"metric": "temperature error RMS (held-out)", "unit": "K", "before": best["e0"],
@@ -489,11 +491,21 @@ def apply_thermal(params: ActuatorParams, thermal: dict[str, Any]):
     notes, not_sim = [], []
     flat = {}
     for f in thermal["findings"]:
-        if f["effect"] in ("thermal_parameters", "voltage_saturation") and f.get("simulated"):
+        if f["effect"] in ("thermal_parameters", "voltage_saturation", "iron_loss") and f.get("simulated"):
             for name, fld in f["fields"].items():
                 spec = SPECS[fld]
                 lo, hi = spec.range
                 flat[fld] = min(max(f["parameters"][name], lo * (1 + 1e-9) + 1e-300), hi)
+            if f["effect"] == "iron_loss":
+                # the nominal friction and damping already hold the total drag a test measured: the iron terms
+                # take their share of it (and heat the stator), the rest stays friction
+                b = params.motor.viscous_damping - flat["effects.iron_loss_eddy"]
+                tc = params.effects.coulomb_friction - flat["effects.iron_loss_hysteresis"]
+                flat["motor.viscous_damping"] = max(b, 0.0)
+                flat["effects.coulomb_friction"] = max(tc, 0.0)
+                if b < 0 or tc < 0:
+                    notes.append("iron_loss: its drag exceeds the nominal damping/friction; those set to 0, the "
+                                 "simulated drag is now larger than nominal")
         else:
             not_sim.append(f["effect"])
     if flat:
