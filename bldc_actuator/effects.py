@@ -140,3 +140,11 @@ def phase_current_measurement(i_a, i_b, offset_a, offset_b, gain_a, gain_b):
     a_m = gain_a * i_a + offset_a
     b_m = gain_b * i_b + offset_b
     return a_m, b_m, -(a_m + b_m)
+
+
+# -- inverter dead time ------------------------------------------------------------------------------
+
+def dead_time_leg_error(i_line, dead_time_voltage):
+    """Average voltage error of one inverter leg [V]: ``-V_dt sign(i)`` with ``V_dt = t_d f_pwm V_bus``
+    (the leg's output falls short against the current it carries)."""
+    return -dead_time_voltage * np.sign(i_line)

@@ -46,7 +46,7 @@ _COEF_SCALARS = (
     "T_c", "Kp", "Ki", "decouple", "T_derate", "T_trip", "T_amb", "R_wh", "R_ha", "C_w", "C_h",
     "tau_c", "tau_asym", "tau_s", "omega_s", "cog_order", "load0", "load_g", "load_phi", "load_k", "load_k0",
     "has_alpha", "has_beta", "has_stribeck", "has_friction", "has_position_load", "k_sat",
-    "fe_h", "fe_e", "sens_off_a", "sens_off_b", "sens_gain_a", "sens_gain_b", "has_sensor_error",
+    "fe_h", "fe_e", "sens_off_a", "sens_off_b", "sens_gain_a", "sens_gain_b", "has_sensor_error", "v_dt",
 )
 COEF_DTYPE = np.dtype(
     [(name, np.float64) for name in _COEF_SCALARS]
@@ -110,6 +110,7 @@ _derate_scale = jit(effects.derate_scale)
 _saturation_factor = jit(effects.saturation_factor)
 _iron_loss_power = jit(effects.iron_loss_power)
 _phase_current_measurement = jit(effects.phase_current_measurement)
+_dead_time_leg_error = jit(effects.dead_time_leg_error)
 _dq_to_abc = jit(frames.dq_to_abc)
 _abc_to_dq = jit(frames.abc_to_dq)
 
@@ -159,6 +160,16 @@ def measured_current_dq(i_d, i_q, theta_e, off_a, off_b, gain_a, gain_b):
     a, b, _ = _dq_to_abc(i_d, i_q, theta_e)
     a_m, b_m, c_m = _phase_current_measurement(a, b, off_a, off_b, gain_a, gain_b)
     return _abc_to_dq(a_m, b_m, c_m, theta_e)
+
+
+@jit
+def dead_time_error_dq(i, theta_e, v_dt):
+    """d-q voltage error [V] of the inverter's dead time for winding current ``i`` (complex, wye: line =
+    phase currents) at the electrical angle ``theta_e``: each leg short by ``v_dt`` against its current."""
+    a, b, c_ = _dq_to_abc(i.real, i.imag, theta_e)
+    e_d, e_q = _abc_to_dq(_dead_time_leg_error(a, v_dt), _dead_time_leg_error(b, v_dt),
+                          _dead_time_leg_error(c_, v_dt), theta_e)
+    return e_d + 1j * e_q
 
 
 @jit
@@ -251,6 +262,8 @@ def advance(c, s, h_ns):
     """Advance the plant by ``h_ns`` [ns] with the held voltage ``s.v``."""
     h = h_ns * 1e-9
     i0, w0, th0, v = s.i, s.omega, s.theta, s.v
+    if c.v_dt != 0.0:   # the inverter's dead time: what reaches the winding, from the currents at the start
+        v = v + dead_time_error_dq(i0, c.pole_pairs * th0, c.v_dt)
     R = _resistance_at(c.R_ref, s.T_w, c.T_ref, c.alpha, True) if c.has_alpha != 0.0 else c.R_ref
     K = c.K_ref * _flux_factor(s.T_h, c.T_ref, c.beta, True) if c.has_beta != 0.0 else c.K_ref  # magnet at T_h
     if c.k_sat != 0.0:   # cross-saturation by the q current at the interval start: torque and back-EMF alike

@@ -435,6 +435,23 @@ def params_saturation(coef, cov, keys, variant, ctx):
                               "field": "effects.kt_saturation" if c > 0 else None, "delta": c}}
 
 
+#: angle average of the q-axis dead-time voltage error per V_dt (six-step square waves of the three legs, i_d = 0):
+#: |mean e_q| = 1.5594 V_dt, computed from frames (test_dead_time_voltage_is_compensated_by_the_current_loop)
+DEAD_TIME_Q_FACTOR = 1.5594
+
+
+def params_dead_time(coef, cov, keys, variant, ctx):
+    """The sign(i) column's coefficient is the mean q-axis voltage the drive adds against its current,
+    1.5594 t_d f_pwm V_bus: drive.dead_time (wye windings; other windings: reported, not simulated)."""
+    v = float(coef[0])
+    d = ctx.params.drive
+    t_d = v / (DEAD_TIME_Q_FACTOR * d.pwm_frequency * d.bus_voltage)
+    fits = t_d > 0 and ctx.params.motor.winding == "wye"
+    return {"dead_time_voltage": {"value": v, "sd": _sd(cov, 0), "unit": "V", "field": None, "delta": v},
+            "dead_time": {"value": t_d, "sd": _sd(cov, 0) / (DEAD_TIME_Q_FACTOR * d.pwm_frequency * d.bus_voltage),
+                          "unit": "s", "field": "drive.dead_time" if fits else None, "delta": t_d}}
+
+
 def params_delay(coef, cov, keys, variant, ctx):
     """The dv/dt column's coefficient is the delay d [s] (v(t - d) = v - d dv/dt): drive.current_loop_delay,
     which the simulator takes up to one loop period."""
@@ -636,10 +653,9 @@ def library() -> dict[str, Candidate]:
                   None, None, None))
     add(Candidate("dead_time", ("electrical",), ("voltage_q", "current", "velocity|position"),
                   "inverter dead time: the applied voltage falls short by a constant times the sign of the current",
-                  False, {"coulomb_friction": "friction acts on torque: compare the voltage equation at standstill "
-                          "with current of both signs"},
-                  v_single("dead_time", {"dead": col_dead_time}), excite_dead_time,
-                  params_generic({"dead": ("dead_time_voltage", "V", None, None)})))
+                  True, {"coulomb_friction": "friction acts on torque: compare the voltage equation at standstill "
+                         "with current of both signs"},
+                  v_single("dead_time", {"dead": col_dead_time}), excite_dead_time, params_dead_time))
     add(Candidate("current_loop_delay", ("electrical",), ("voltage_q", "current", "velocity|position"),
                   "the recorded voltage leads the current by a delay (PWM / computation delay)", True,
                   {"inductance_error": "current steps recorded at a higher rate than the current loop"},
