@@ -836,7 +836,7 @@ def implausible(cand: Candidate, coef, cov, keys, variant: Variant, ctx) -> str 
     v, sd = val("delay")
     if v is not None:
         checks.append((abs(v) <= 2e-3, f"delay {1e3 * v:.3g} ms beyond 2 ms"))
-    v, sd = val("saturation_coefficient")
+    v, sd = val("kt_saturation")
     if v is not None:
         i_max = float(np.percentile(np.abs(ctx.dsig("i_q")), 99.5))
         checks.append((-0.05 <= v * i_max <= 0.6, f"saturation {100 * v * i_max:.3g}% at {i_max:.3g} A"))
