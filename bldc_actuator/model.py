@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import cmath
 import math
+from collections import namedtuple
 from dataclasses import dataclass, fields
 from types import SimpleNamespace
 from typing import Any, Sequence
@@ -271,6 +272,10 @@ class EnergyLedger:
 
 # -- public classes ------------------------------------------------------------------------------------
 
+#: one actuator's kernel state as a named tuple (cheap to build every publish period)
+_StateView = namedtuple("_StateView", STATE_DTYPE.names)
+
+
 def _seconds_to_ns(dt: float) -> int:
     if not (dt >= 0.0 and math.isfinite(dt)):
         raise ValueError(f"dt: expected a finite duration >= 0 s, got {dt!r}")
@@ -321,7 +326,7 @@ class _Base:
         """The state as attributes (arrays for a batch, scalars for one actuator)."""
         if not self._batch:
             values = self._ss[0].item() if self._rs is None else [getattr(self._rs[0], n) for n in STATE_DTYPE.names]
-            return SimpleNamespace(**dict(zip(STATE_DTYPE.names, values)))
+            return _StateView._make(values)
         return SimpleNamespace(**{name: self._get(name) for name in STATE_DTYPE.names})
 
     def step(self, dt: float) -> None:
@@ -463,7 +468,11 @@ class Actuator(_Base):
 def _outputs(c: _Coeffs, s, winding, ops) -> dict[str, Any]:
     i_d, i_q = s.i.real, s.i.imag
     v_d, v_q = s.v.real, s.v.imag
-    K = c.K_ref * effects.flux_factor(s.T_h, c.T_ref, c.beta) * effects.saturation_factor(s.i.imag, c.k_sat)
+    # the same effects functions as the kernel; for one actuator their compiled forms (numpy ufuncs on Python
+    # floats cost ~1 µs each, and the node calls this every period)
+    K = c.K_ref * effects.flux_factor(s.T_h, c.T_ref, c.beta)
+    if c.batch or c.k_sat:
+        K = K * (effects.saturation_factor if c.batch else kernel._saturation_factor)(i_q, c.k_sat)  # noqa: SLF001
     theta_e = c.pole_pairs * s.theta
     i_a, i_b, i_c = frames.dq_to_abc(i_d, i_q, theta_e)
     i_A, i_B, i_C = frames.phase_to_line_current(i_a, i_b, i_c, winding)
@@ -488,8 +497,8 @@ def _outputs(c: _Coeffs, s, winding, ops) -> dict[str, Any]:
         "resistance_phase": effects.resistance_at(c.R_ref, s.T_w, c.T_ref, c.alpha),
         "joule_power": effects.resistance_at(c.R_ref, s.T_w, c.T_ref, c.alpha) * abs(s.i) ** 2,
         "i_d_measured": i_meas[0], "i_q_measured": i_meas[1],
-        "current_limit_effective": ops.where(s.tripped, 0.0,
-                                             c.I_lim * effects.derate_scale(s.T_w, c.T_derate, c.T_trip)),
+        "current_limit_effective": ops.where(s.tripped, 0.0, c.I_lim * (
+            effects.derate_scale if c.batch else kernel._derate_scale)(s.T_w, c.T_derate, c.T_trip)),  # noqa: SLF001
         "tripped": s.tripped,
     }
 
