@@ -283,3 +283,50 @@ def test_files_directly_in_the_root_share_the_folder_id(tmp_path):
     d.mkdir()
     ids = {source.actuator_id(S(), d / f"2026-01-0{k}_joints.csv", d, joint="J1") for k in (1, 2)}
     assert ids == {"robot2/J1"}
+
+
+def test_multi_joint_node_recording_gives_one_row_set_per_joint(rclpy_ok, tmp_path):
+    """A recording of two joints in one node (per-joint topics ~/<joint>/..., one JointState with both
+    names): each joint is diagnosed on its own, the planted friction shows on the right joint only."""
+    import inspect
+
+    from bldc_actuator.diagnosis import loaders
+    from bldc_actuator.fleet import run as R
+    from bldc_actuator.fleet import source
+    from bldc_actuator.node import Q_AXIS_FIELDS
+    from bldc_actuator.recording import McapRecorder
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+
+    if "joint" not in inspect.signature(loaders.load).parameters:
+        pytest.skip("this build's loaders cannot select a joint of a multi-joint recording")
+    nominal = G.nominal_params()
+    rng = np.random.default_rng(3)
+    sigs = {"knee": G.simulate(nominal.replace(**{"effects.coulomb_friction": 0.045}), 10.0, 200.0, rng),
+            "hip": G.simulate(nominal, 10.0, 200.0, rng)}
+    f = tmp_path / "robot" / "2026-01-05.mcap"
+    f.parent.mkdir()
+    with McapRecorder(f, parameters=nominal.to_flat(), metadata={"node": "/bldc_actuator", "joints": "knee,hip"}) as rec:
+        q = Float64MultiArray()
+        q.layout.dim = [MultiArrayDimension(label=",".join(Q_AXIS_FIELDS), size=len(Q_AXIS_FIELDS),
+                                            stride=len(Q_AXIS_FIELDS))]
+        for k in range(len(sigs["knee"]["t"])):
+            t_ns = int(round(sigs["knee"]["t"][k] * 1e9))
+            j = JointState(name=["knee", "hip"])
+            j.header.stamp.sec, j.header.stamp.nanosec = divmod(t_ns, 1_000_000_000)
+            j.position = [float(sigs[n]["position_out"][k]) for n in ("knee", "hip")]
+            j.velocity = [float(sigs[n]["velocity_out"][k]) for n in ("knee", "hip")]
+            j.effort = [float(sigs[n]["effort_out"][k]) for n in ("knee", "hip")]
+            rec.write("/joint_states", j, t_ns)
+            for n in ("knee", "hip"):
+                q.data = [float(sigs[n][x][k]) for x in Q_AXIS_FIELDS]
+                rec.write(f"/bldc_actuator/{n}/q_axis_state", q, t_ns)
+    assert sorted(source.joints(f)) == ["hip", "knee"]
+    params = tmp_path / "p.yaml"
+    params.write_text(__import__("bldc_actuator.params", fromlist=["dump_yaml"]).dump_yaml(nominal))
+    res = R.process_file(R.Job(str(f), str(tmp_path), str(params), diagnose=False))
+    assert not res["failures"], res["failures"]
+    fr = {r["actuator_id"]: r for r in res["rows"] if r["parameter"] == "coulomb_friction"}
+    assert set(fr) == {"robot/knee", "robot/hip"}
+    assert fr["robot/knee"]["value"] == pytest.approx(0.045, rel=0.06)
+    assert fr["robot/hip"]["value"] == pytest.approx(0.03 * 1.0, rel=0.06)

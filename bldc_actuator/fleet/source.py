@@ -42,10 +42,23 @@ def joints(path: str | Path, profile=None) -> list[str | None]:
     """Joint names in a file (``[None]`` for a single-joint recording)."""
     func = getattr(loaders, "joints", None)
     if func is None:
-        return [None]
+        return _node_mcap_joints(path)
     found = func(path, profile=profile) if _accepts(func, "profile") else func(path)
     found = list(found or [])
     return found if found else [None]
+
+
+def _node_mcap_joints(path: str | Path) -> list[str | None]:
+    """A recording of several joints by ``actuator_node`` (one ``~/<joint>/q_axis_state`` per joint, as
+    the loader itself recognises them), else ``[None]``. Used when the loaders have no ``joints()``."""
+    p = Path(path)
+    if p.suffix.lower() != ".mcap" or not _accepts(loaders.load, "joint") or not hasattr(loaders, "_mcap_topics"):
+        return [None]
+    topics = loaders._mcap_topics(p)
+    q = [t for t in topics if t.endswith("/q_axis_state")]
+    if len(q) > 1 and any(t.endswith("joint_states") for t in topics):
+        return sorted(t.rsplit("/", 2)[-2] for t in q)
+    return [None]
 
 
 def load(path: str | Path, *, joint=None, profile=None, mapping=None, params=None):
