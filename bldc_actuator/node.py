@@ -26,6 +26,7 @@ Parameters: see :mod:`bldc_actuator.node_params`. ``actuator_node --help`` lists
 from __future__ import annotations
 
 import math
+import operator
 import sys
 import threading
 import time
@@ -59,6 +60,7 @@ Q_AXIS_FIELDS = ("i_q", "i_d", "i_q_ref", "v_q", "v_d", "v_limit_q", "bus_voltag
                  "omega", "torque_em", "current_limit_effective", "joule_power", "resistance_phase",
                  "voltage_saturated", "tripped")
 PHASE_FIELDS = ("i_phase_a", "i_phase_b", "i_phase_c")
+_Q_GET, _PHASE_GET = operator.itemgetter(*Q_AXIS_FIELDS), operator.itemgetter(*PHASE_FIELDS)
 
 #: a command beyond this multiple of the drive's current limit (in current) is rejected as absurd;
 #: commands between 1x and this are accepted and limited by the drive like a real one would
@@ -229,6 +231,7 @@ class ActuatorNode(Node):
         self._m_joint = JointState(name=[j.name for j in self.joints])
         self._m_joint.header.frame_id = self.joint_name if not self.multi else ""
         self._m_clock = ClockMsg()
+        self._stamp_now = TimeMsg()
 
         record = nv["node.record"]
         if record:
@@ -367,13 +370,14 @@ class ActuatorNode(Node):
 
     def _publish_state(self) -> None:
         t_ns = self.t_ns
-        stamp = _stamp(t_ns)
+        stamp = self._stamp_now          # one Time message, updated in place (all of this period's headers)
+        stamp.sec, stamp.nanosec = divmod(t_ns, 1_000_000_000)
         outs = [j.actuator.outputs() for j in self.joints]
         m = self._m_joint
         m.header.stamp = stamp
-        m.position = [float(o["position_out"]) for o in outs]
-        m.velocity = [float(o["velocity_out"]) for o in outs]
-        m.effort = [float(o["effort_out"]) for o in outs]
+        m.position = [o["position_out"] for o in outs]      # Python floats (outputs() of one actuator)
+        m.velocity = [o["velocity_out"] for o in outs]
+        m.effort = [o["effort_out"] for o in outs]
         if self.pub_clock is not None:
             self._m_clock.clock = stamp
             self._publish(self.pub_clock, self._m_clock, t_ns)
@@ -385,8 +389,8 @@ class ActuatorNode(Node):
             j.last_outputs = o
             j.win_saturated += bool(o["voltage_saturated"])
             if detail:
-                j.m_phase.data = [float(o[k]) for k in PHASE_FIELDS]
-                j.m_q.data = [float(o[k]) for k in Q_AXIS_FIELDS]
+                j.m_phase.data = list(map(float, _PHASE_GET(o)))
+                j.m_q.data = list(map(float, _Q_GET(o)))
                 j.m_tw.header.stamp = j.m_th.header.stamp = stamp
                 j.m_tw.temperature = float(o["T_winding"])
                 j.m_th.temperature = float(o["T_housing"])
