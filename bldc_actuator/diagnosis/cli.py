@@ -40,6 +40,12 @@ def register(subparsers) -> None:
     g.add_argument("--holdout", type=float, default=0.3, metavar="FRACTION",
                    help="fraction of the recording held out, in interleaved time blocks (default 0.3)")
     g.add_argument("--holdout-file", metavar="F", help="a second recording used as held-out data")
+    p.add_argument("--tolerance", type=float, default=0.05, metavar="FRACTION",
+                   help="a parameter-change finding (K_t, J, R, L, thermal network) must move its parameter by more "
+                        "than this fraction of nominal, else 'consistent with nominal' (default 0.05)")
+    p.add_argument("--max-uncertainty", type=float, default=0.5, metavar="FRACTION",
+                   help="every accepted value must have a relative uncertainty below this, else 'suspected, not "
+                        "identifiable' (default 0.5)")
     p.add_argument("--cutoff", type=float, metavar="HZ", help="parallel low-pass cut-off (default min(fs/10, 100 Hz))")
     p.add_argument("--window", type=float, default=0.1, metavar="S", help="replay window length (default 0.1 s)")
     p.add_argument("--no-plots", action="store_true", help="Markdown report without PNGs")
@@ -106,8 +112,13 @@ def run(args) -> int:
         holdout_signals = _load(args.holdout_file, mapping, params, args.joint)[0] if args.holdout_file else None
     except (ValueError, OSError) as exc:    # LoadError is a ValueError
         return _fail(str(exc))
+    if not (0.0 <= args.tolerance < 1.0):
+        return _fail(f"--tolerance: expected a fraction 0 <= f < 1, got {args.tolerance!r}")
+    if not (args.max_uncertainty > 0.0):
+        return _fail(f"--max-uncertainty: expected a fraction > 0, got {args.max_uncertainty!r}")
     options = DiagnoseOptions(effects=effects, holdout=args.holdout, holdout_signals=holdout_signals,
-                              cutoff_hz=args.cutoff, window_s=args.window, progress=progress)
+                              cutoff_hz=args.cutoff, window_s=args.window, progress=progress,
+                              tolerance=args.tolerance, max_relative_uncertainty=args.max_uncertainty)
     try:
         report = diagnose(signals, params, options=options)
     except ValueError as exc:

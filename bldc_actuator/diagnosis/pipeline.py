@@ -33,7 +33,7 @@ from ..params import ActuatorParams
 from . import candidates as cands
 from . import equation_error as ee
 from . import locate as loc_mod
-from . import refit
+from . import refit, significance
 from .report import DiagnosisReport
 from .selection import GateConfig, fit_model, forward_select
 
@@ -50,6 +50,8 @@ class DiagnoseOptions:
     max_windows: int = 120                    #: replay windows per set (evenly thinned)
     replay: bool = True                       #: run the short-window simulation comparison
     gate: GateConfig = field(default_factory=GateConfig)
+    tolerance: float = 0.05                   #: a parameter-change finding must move its parameter by more
+    max_relative_uncertainty: float = 0.5     #: every accepted value must be identified this well (sd/|value|)
     progress: bool | Callable[[str], None] = False   #: True: one line per stage on stderr
 
     def validated_effects(self) -> list[str]:
@@ -202,6 +204,24 @@ def _diagnose(signals, params: ActuatorParams, options: DiagnoseOptions) -> Diag
     t0 = time.perf_counter()
     ff = refit.final_fit(ctx, sel)
     pars = refit.effect_parameters(ctx, sel, ff, lib)
+    # practical significance and identifiability: drop before the final fit and the parameter file
+    candidates_pars = dict(pars)
+    for f in thermal["findings"]:
+        candidates_pars[f["effect"]] = {k: {"value": v, "sd": f["uncertainty"].get(k), "field": f["fields"].get(k)}
+                                        for k, v in f["parameters"].items()}
+    experiments = {n: next(iter(c.confusable.values()), "") for n, c in lib.items() if c.confusable}
+    verdicts = significance.judge(candidates_pars, ctx.params, tolerance=options.tolerance,
+                                  max_relative_uncertainty=options.max_relative_uncertainty, experiments=experiments)
+    dropped = {v.effect for v in verdicts}
+    if dropped:
+        if any(a.effect in dropped for a in sel.accepted):
+            sel.accepted = [a for a in sel.accepted if a.effect not in dropped]
+            ff = refit.final_fit(ctx, sel)
+            sel.final_fit = ff.fit
+            pars = refit.effect_parameters(ctx, sel, ff, lib)
+        thermal["findings"] = [f for f in thermal["findings"] if f["effect"] not in dropped]
+        for v in verdicts:
+            say(f"5/6 model: {v.message}")
     new_params, param_notes, not_sim = refit.updated_params(ctx, sel, pars, lib)
     if thermal["findings"]:
         new_params, tnotes, tns = refit.apply_thermal(new_params, thermal)
@@ -258,7 +278,9 @@ def _diagnose(signals, params: ActuatorParams, options: DiagnoseOptions) -> Diag
                "thermal": thermal_cmp}
     say(f"6/6 show: {verdict} ({timing['show']:.2f} s; total {timing['total']:.2f} s)")
     report = DiagnosisReport(
-        channels=channels, findings=findings, rejected=sel.rejected + thermal["rejected"], windows=windows,
+        channels=channels, findings=findings, windows=windows,
+        rejected=sel.rejected + thermal["rejected"] + [{"effect": v.effect, "form": "practical significance",
+                                                         "verdict": v.kind, "reason": v.message} for v in verdicts],
         data_issues=data_issues, not_checkable=sel.not_checkable + thermal["not_checkable"], aliases=aliases,
         verdict=verdict, notes=ctx.notes + param_notes, compare=compare, locate=located,
         rounds=sel.rounds, correlations=ff.correlations, not_simulated=not_sim, timing=timing,
