@@ -69,3 +69,19 @@ def test_a_two_percent_torque_constant_error_is_consistent_with_nominal_end_to_e
     k = rep1.finding("torque_constant_error")["parameters"]["torque_constant_q"]
     assert k == pytest.approx(truth.motor.torque_constant_q, rel=0.005)
     assert rep1.updated_params.motor.torque_constant_q == pytest.approx(k, rel=1e-9)
+
+
+def test_a_100_hz_log_cannot_check_loop_delay_or_inductance():
+    """Issue #7, symptom 1: a 100 Hz recording cannot see what happens within a current-loop period; the loop
+    delay and the inductance are reported 'not checkable at 100 Hz' instead of being fitted to sampling
+    artefacts."""
+    import test_diagnosis_analysis as T
+    from bldc_actuator.diagnosis.pipeline import DiagnoseOptions, diagnose
+
+    sig = T.make_recording(T.NOMINAL, duration=30.0, rate=100.0, seed=12)
+    rep = diagnose(sig, T.NOMINAL, options=DiagnoseOptions(effects=["current_loop_delay", "inductance_error",
+                                                                    "coulomb_friction"]))
+    nc = {n["effect"]: n["reason"] for n in rep.not_checkable}
+    for effect in ("current_loop_delay", "inductance_error"):
+        assert nc[effect].startswith("not checkable at 100 Hz"), nc
+    assert not rep.findings

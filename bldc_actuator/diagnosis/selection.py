@@ -122,9 +122,11 @@ def checkable(ctx: Context, cand: Candidate, loc: dict) -> tuple[list[Variant] |
                       "needs": list(cand.needs)}
     if any(len(ctx.blocks[eq].valid) and ctx.blocks[eq].valid.sum() < 20 for eq in cand.equations if eq in ctx.blocks):
         return None, {"effect": cand.name, "reason": "too few valid samples", "needs": []}
-    if ctx.nuisance and cand.name == "inductance_error":
-        return None, {"effect": cand.name, "reason": f"not identifiable: {ctx.nuisance_reason}; needs a "
-                      f"recording at >= 4 x the current-loop bandwidth", "needs": []}
+    if ctx.nuisance and cand.name in ("inductance_error", "current_loop_delay"):
+        # what happens within a current-loop period cannot be seen between samples: say so, never fit the
+        # sampling artefact (issue #7, symptom 1: a 1.9 ms "loop delay" from a 100 Hz log)
+        return None, {"effect": cand.name, "reason": f"not checkable at {ctx.fs:.4g} Hz: {ctx.nuisance_reason}; "
+                      f"needs a recording at >= 4 x the current-loop bandwidth", "needs": []}
     if cand.excited is not None:
         why = cand.excited(ctx)
         if why:
