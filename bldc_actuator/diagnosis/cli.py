@@ -46,6 +46,10 @@ def register(subparsers) -> None:
     p.add_argument("--max-uncertainty", type=float, default=0.5, metavar="FRACTION",
                    help="every accepted value must have a relative uncertainty below this, else 'suspected, not "
                         "identifiable' (default 0.5)")
+    p.add_argument("--simulation-gate", action="store_true",
+                   help="accept only findings that make the simulated actuator reproduce held-out data better "
+                        "(leave-one-out replay beyond the window-to-window noise floor); without it the simulated "
+                        "verdict is reported per finding")
     p.add_argument("--cutoff", type=float, metavar="HZ", help="parallel low-pass cut-off (default min(fs/10, 100 Hz))")
     p.add_argument("--window", type=float, default=0.1, metavar="S", help="replay window length (default 0.1 s)")
     p.add_argument("--no-plots", action="store_true", help="Markdown report without PNGs")
@@ -118,7 +122,8 @@ def run(args) -> int:
         return _fail(f"--max-uncertainty: expected a fraction > 0, got {args.max_uncertainty!r}")
     options = DiagnoseOptions(effects=effects, holdout=args.holdout, holdout_signals=holdout_signals,
                               cutoff_hz=args.cutoff, window_s=args.window, progress=progress,
-                              tolerance=args.tolerance, max_relative_uncertainty=args.max_uncertainty)
+                              tolerance=args.tolerance, max_relative_uncertainty=args.max_uncertainty,
+                              simulation_gate=args.simulation_gate)
     try:
         report = diagnose(signals, params, options=options)
     except ValueError as exc:
@@ -145,6 +150,11 @@ def _print_summary(report, args) -> None:
             line += f"; frame factor {f['frame_factor']}"
         if ho:
             line += f"; held-out {ho['metric']}: {_fmt(ho['before'])} -> {_fmt(ho['after'])} {ho.get('unit', '')}"
+        sim = f.get("simulation")
+        if sim:
+            unit = "rad/s" if sim["channel"] == "velocity" else "A"
+            line += (f"; simulated held-out {sim['channel']} error without/with it {_fmt(sim['without'])} -> "
+                     f"{_fmt(sim['with'])} {unit}: {sim['verdict']}")
         print(line)
     for a in report.aliases:
         print(f"  alias: {a['message']}; experiment: {a['experiment']}")

@@ -33,7 +33,7 @@ from ..params import ActuatorParams
 from . import candidates as cands
 from . import equation_error as ee
 from . import locate as loc_mod
-from . import refit, significance
+from . import judge, refit, significance
 from .report import DiagnosisReport
 from .selection import GateConfig, fit_model, forward_select
 
@@ -50,6 +50,7 @@ class DiagnoseOptions:
     max_windows: int = 120                    #: replay windows per set (evenly thinned)
     replay: bool = True                       #: run the short-window simulation comparison
     gate: GateConfig = field(default_factory=GateConfig)
+    simulation_gate: bool = False             #: accept only findings the held-out simulation confirms
     tolerance: float = 0.05                   #: a parameter-change finding must move its parameter by more
     max_relative_uncertainty: float = 0.5     #: every accepted value must be identified this well (sd/|value|)
     progress: bool | Callable[[str], None] = False   #: True: one line per stage on stderr
@@ -222,6 +223,22 @@ def _diagnose(signals, params: ActuatorParams, options: DiagnoseOptions) -> Diag
         thermal["findings"] = [f for f in thermal["findings"] if f["effect"] not in dropped]
         for v in verdicts:
             say(f"5/6 model: {v.message}")
+    # the simulator as judge: each finding's held-out simulated error with and without it (leave one out)
+    sim_verdicts = judge.simulate_findings(ctx, sel, pars, lib, starts_ho, options.window_s) \
+        if options.replay and starts_ho else {}
+    if options.simulation_gate:
+        refused = {e for e, v in sim_verdicts.items() if v["verdict"] != "confirmed"}
+        if refused:
+            for e in sorted(refused):
+                v = sim_verdicts[e]
+                verdicts.append(significance.Verdict(e, "not_confirmed_in_simulation",
+                                                     f"{e}: {v['verdict']} (held-out simulated {v['channel']} error "
+                                                     f"{v['without']:.3g} -> {v['with']:.3g}, noise floor "
+                                                     f"{v['noise_floor']:.2g})"))
+            sel.accepted = [a for a in sel.accepted if a.effect not in refused]
+            ff = refit.final_fit(ctx, sel)
+            sel.final_fit = ff.fit
+            pars = refit.effect_parameters(ctx, sel, ff, lib)
     new_params, param_notes, not_sim = refit.updated_params(ctx, sel, pars, lib)
     if thermal["findings"]:
         new_params, tnotes, tns = refit.apply_thermal(new_params, thermal)
@@ -234,6 +251,9 @@ def _diagnose(signals, params: ActuatorParams, options: DiagnoseOptions) -> Diag
     # 6. show ----------------------------------------------------------------------------------
     t0 = time.perf_counter()
     findings = _findings(ctx, sel, ff, pars, lib, located, not_sim)
+    for f in findings:
+        if f["effect"] in sim_verdicts:
+            f["simulation"] = sim_verdicts[f["effect"]]
     findings += thermal["findings"]
     replay_ho = None
     if options.replay and starts_ho:
@@ -298,7 +318,7 @@ def _diagnose(signals, params: ActuatorParams, options: DiagnoseOptions) -> Diag
 def _strip(r):
     if not r:
         return r
-    return {k: v for k, v in r.items() if k != "trace"}
+    return {k: v for k, v in r.items() if k not in ("trace", "per_window")}
 
 
 def _issue_dict(issue) -> dict:

@@ -303,6 +303,8 @@ def replay(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], le
         sl = np.arange(j * nW, (j + 1) * nW)
         ei, ew, eth = sim_i[:, sl] - meas_i[:, sl], sim_w[:, sl] - meas_w[:, sl], sim_th[:, sl] - meas_th[:, sl]
         out.append({"available": True, "windows": nW, "window_s": length,
+                    "per_window": {"current": np.sqrt(np.mean(ei ** 2, axis=0)),
+                                   "velocity": np.sqrt(np.mean(ew ** 2, axis=0))},
                     "current_rms": float(np.sqrt(np.mean(ei ** 2))), "velocity_rms": float(np.sqrt(np.mean(ew ** 2))),
                     "position_rms": float(np.sqrt(np.mean(eth ** 2))),
                     "trace": {"t": ctx.t[idx[:, sl[show]]].T.tolist(),
