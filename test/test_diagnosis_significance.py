@@ -85,3 +85,36 @@ def test_a_100_hz_log_cannot_check_loop_delay_or_inductance():
     for effect in ("current_loop_delay", "inductance_error"):
         assert nc[effect].startswith("not checkable at 100 Hz"), nc
     assert not rep.findings
+
+
+def test_the_simulator_confirms_a_real_finding_and_the_gate_keeps_it():
+    """Planted Coulomb friction: the held-out replay through the kernel (leave one out) is better WITH the finding
+    by more than its window-to-window noise floor: 'confirmed'; with --simulation-gate it stays accepted."""
+    import test_diagnosis_analysis as T
+    from bldc_actuator.diagnosis.pipeline import DiagnoseOptions, diagnose
+
+    sig = T.make_recording(T.TRUTHS["coulomb"], seed=2)
+    rep = diagnose(sig, T.NOMINAL, options=DiagnoseOptions(simulation_gate=True))
+    assert "coulomb_friction" in rep.effects
+    sim = rep.finding("coulomb_friction")["simulation"]
+    assert sim["channel"] == "velocity" and sim["verdict"] == "confirmed"
+    assert sim["with"] < sim["without"] and sim["improvement"] > sim["noise_floor"] > 0
+
+
+def test_the_simulation_gate_refuses_what_the_simulation_does_not_confirm():
+    """A finding whose leave-one-out replay is no better (here: forced by an impossible noise floor, z huge) is
+    refused by the gate and reported with the simulated numbers."""
+    import test_diagnosis_analysis as T
+    from bldc_actuator.diagnosis import judge, pipeline
+
+    sig = T.make_recording(T.TRUTHS["coulomb"], seed=2)
+    original = judge.simulate_findings
+    try:
+        judge.simulate_findings = lambda *a, **k: original(*a, **{**k, "z": 1e9})
+        rep = pipeline.diagnose(sig, T.NOMINAL, options=pipeline.DiagnoseOptions(simulation_gate=True))
+    finally:
+        judge.simulate_findings = original
+    assert "coulomb_friction" not in rep.effects
+    why = [r for r in rep.rejected if r["effect"] == "coulomb_friction" and r.get("verdict")]
+    assert why and why[0]["verdict"] == "not_confirmed_in_simulation" and "noise floor" in why[0]["reason"]
+    assert rep.updated_params.effects.coulomb_friction == T.NOMINAL.effects.coulomb_friction
