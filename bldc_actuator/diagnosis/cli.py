@@ -151,8 +151,8 @@ def _print_summary(report, args) -> None:
         if ho:
             line += f"; held-out {ho['metric']}: {_fmt(ho['before'])} -> {_fmt(ho['after'])} {ho.get('unit', '')}"
         sim = f.get("simulation")
-        if sim:
-            unit = "rad/s" if sim["channel"] == "velocity" else "A"
+        if sim and sim.get("channel"):
+            unit = {"velocity": "rad/s", "current": "A", "voltage": "V"}[sim["channel"]]
             line += (f"; simulated held-out {sim['channel']} error without/with it {_fmt(sim['without'])} -> "
                      f"{_fmt(sim['with'])} {unit}: {sim['verdict']}")
         print(line)

@@ -19,8 +19,9 @@ import numpy as np
 
 from . import refit
 
-#: the simulated channel in which each equation's effects show
-_CHANNEL = {"mechanical": "velocity", "electrical": "current", "tracking": "current"}
+#: the simulated channel in which each equation's effects show (voltage-side effects: the drive's q voltage,
+#: since the current loop hides them in the current; current when no voltage was recorded)
+_CHANNEL = {"mechanical": "velocity", "electrical": "voltage", "tracking": "current"}
 
 
 def _paired(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
@@ -34,7 +35,8 @@ def _paired(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
 
 def simulate_findings(ctx, sel, pars, lib, starts: list[int], window_s: float, z: float = 2.0) -> dict[str, dict[str, Any]]:
     """Per accepted effect: {"channel", "without", "with", "improvement", "noise_floor", "other_channel_change",
-    "verdict": "confirmed" | "not confirmed" | "worsens <channel>"}. Empty when no held-out windows."""
+    "verdict": "confirmed" | "not confirmed" | "worsens the simulated <channel>" | "not simulated"}. Empty when
+    no held-out windows."""
     if not starts or not sel.accepted:
         return {}
     full, _, _ = refit.updated_params(ctx, sel, pars, lib)
@@ -48,9 +50,14 @@ def simulate_findings(ctx, sel, pars, lib, starts: list[int], window_s: float, z
         return {}
     out: dict[str, dict[str, Any]] = {}
     w_full = res[0]["per_window"]
-    for e, r in zip(effects, res[1:]):
+    for e, r, p_without in zip(effects, res[1:], sets[1:]):
+        if p_without == full:   # no simulator term (e.g. a current-dependent angle ripple): cannot be judged here
+            out[e] = {"verdict": "not simulated", "channel": None}
+            continue
         eqs = [q for q in lib[e].equations if q in _CHANNEL]
         ch = _CHANNEL[eqs[0]] if eqs else "velocity"
+        if ch == "voltage" and w_full.get("voltage") is None:
+            ch = "current"
         other = "current" if ch == "velocity" else "velocity"
         imp, se = _paired(r["per_window"][ch], w_full[ch])          # error without - error with
         imp_o, se_o = _paired(r["per_window"][other], w_full[other])

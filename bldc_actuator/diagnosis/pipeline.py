@@ -227,7 +227,7 @@ def _diagnose(signals, params: ActuatorParams, options: DiagnoseOptions) -> Diag
     sim_verdicts = judge.simulate_findings(ctx, sel, pars, lib, starts_ho, options.window_s) \
         if options.replay and starts_ho else {}
     if options.simulation_gate:
-        refused = {e for e, v in sim_verdicts.items() if v["verdict"] != "confirmed"}
+        refused = {e for e, v in sim_verdicts.items() if v["verdict"] not in ("confirmed", "not simulated")}
         if refused:
             for e in sorted(refused):
                 v = sim_verdicts[e]

@@ -287,6 +287,7 @@ def replay(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], le
     sim_i = np.zeros((L, len(plist)))
     sim_w = np.zeros((L, len(plist)))
     sim_th = np.zeros((L, len(plist)))
+    sim_v = np.zeros((L, len(plist)))          # the drive's q voltage: where voltage-side effects show
     for k in range(L):
         b.set_current_command(cmd[st + k])
         if load is not None:
@@ -295,8 +296,10 @@ def replay(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], le
         sim_i[k] = b.field("i").imag
         sim_w[k] = b.field("omega")
         sim_th[k] = b.field("theta")
+        sim_v[k] = b.field("v").imag
     idx = st[None, :] + np.arange(1, L + 1)[:, None]
     meas_i, meas_w, meas_th = i_meas[idx], w_meas[idx], S["theta"][idx]
+    meas_v = ctx.dec.lowpass(S["v_q"])[idx] if "v_q" in S else None
     out = []
     show = np.unique(np.linspace(0, nW - 1, min(4, nW)).round().astype(int))
     for j in range(nP):
@@ -304,7 +307,9 @@ def replay(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], le
         ei, ew, eth = sim_i[:, sl] - meas_i[:, sl], sim_w[:, sl] - meas_w[:, sl], sim_th[:, sl] - meas_th[:, sl]
         out.append({"available": True, "windows": nW, "window_s": length,
                     "per_window": {"current": np.sqrt(np.mean(ei ** 2, axis=0)),
-                                   "velocity": np.sqrt(np.mean(ew ** 2, axis=0))},
+                                   "velocity": np.sqrt(np.mean(ew ** 2, axis=0)),
+                                   "voltage": (np.sqrt(np.mean((sim_v[:, sl] - meas_v[:, sl]) ** 2, axis=0))
+                                               if meas_v is not None else None)},
                     "current_rms": float(np.sqrt(np.mean(ei ** 2))), "velocity_rms": float(np.sqrt(np.mean(ew ** 2))),
                     "position_rms": float(np.sqrt(np.mean(eth ** 2))),
                     "trace": {"t": ctx.t[idx[:, sl[show]]].T.tolist(),
