@@ -379,6 +379,18 @@ def step_all(cs, ss, dt_ns):
         step(cs[k], ss[k], dt_ns)
 
 
+def compiled_entry(dispatcher, *example_args):
+    """The compiled entry point of ``dispatcher`` for arguments typed like ``example_args`` (compiled or loaded
+    from the cache now): calling it skips numba's per-call type dispatch (~0.3 µs, a third of a 1 ms step of one
+    actuator). Falls back to the dispatcher itself if numba's API differs."""
+    try:
+        sig = tuple(_numba.typeof(a) for a in example_args) + (_numba.types.int64,)
+        dispatcher.compile(sig)
+        return dispatcher.overloads[sig].entry_point
+    except Exception:  # noqa: BLE001 - an optimisation only
+        return dispatcher
+
+
 def warm_up() -> float:
     """Compile (or load from numba's on-disk cache) the kernel now; returns the seconds it took. Call it
     before real time starts (the node does) so the first ``step`` does not stall. A no-op without numba."""

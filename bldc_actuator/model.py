@@ -297,8 +297,11 @@ class _Base:
         self._ss["T_w"], self._ss["T_h"] = T_w0, T_h0
         self._T0 = (T_w0, T_h0) if self._batch else (float(T_w0), float(T_h0))
         self._rc = self._rs = None
+        self._step_all = kernel.step_all
         if not COMPILED:
             self._rc, self._rs = kernel.to_records(self._cs), kernel.to_records(self._ss)
+        else:
+            self._step_all = kernel.compiled_entry(kernel.step_all, self._cs, self._ss)
 
     def _new_coeffs(self, plist) -> None:
         self._c = _Coeffs(plist if self._batch else plist[0])
@@ -332,14 +335,14 @@ class _Base:
     def step(self, dt: float) -> None:
         """Advance the simulation by ``dt`` seconds (any size; rounded to whole ns)."""
         if self._rs is None and dt > 0.0 and dt < 1e9:   # the hot path: straight into the compiled kernel
-            kernel.step_all(self._cs, self._ss, int(round(dt * 1e9)))
+            self._step_all(self._cs, self._ss, int(round(dt * 1e9)))
             return
         self.step_ns(_seconds_to_ns(dt))
 
     def step_ns(self, dt_ns: int) -> None:
         dt_ns = int(dt_ns)
         if self._rs is None:
-            kernel.step_all(self._cs, self._ss, dt_ns)
+            self._step_all(self._cs, self._ss, dt_ns)
         else:
             for c, s in zip(self._rc, self._rs):
                 kernel.step(c, s, dt_ns)
