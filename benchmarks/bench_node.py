@@ -224,6 +224,9 @@ def robot_figures(context, kinds, args) -> None:
     """Issue #8's figures: N joints at 1 kHz publish / 10 kHz physics in real time with commands from another
     process (500 Hz); as fast as possible for N joints and for one; lock-step for one joint."""
     n = args.robot
+    import gc
+    gc.collect()
+    gc.freeze()      # as actuator_node's main() does: the node's long-lived objects out of the collector's way
     for kind in kinds:
         print(f"\n[robot, {kind} executor]")
         r = run_free(context, kind, args.seconds, 1.0, None, joints=n, detail_rate=args.detail_rate,
