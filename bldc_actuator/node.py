@@ -798,7 +798,7 @@ OWN_FLAGS = {"--record": "PATH", "--executor": "events|single"}
 def make_executor(kind: str | None = None, context=None):
     """``events`` (rclpy.experimental.EventsExecutor, ROS 2 Kilted+; the default where it exists) or
     ``single`` (SingleThreadedExecutor; the default on older ROS 2). Measured (benchmarks/bench_node.py,
-    12 joints at 1 kHz): events keeps 1000 Hz at about half the CPU of single, which cannot keep up, and makes
+    12 joints at 1 kHz): events keeps 1000 Hz on a third of a core, single needs a whole one, and events makes
     lock-step round trips about 5x faster."""
     if kind in (None, "events"):
         try:
