@@ -813,15 +813,6 @@ def _params_from_flat(flat: dict | None):
 
 
 
-def recorded_joints(metadata: list[tuple[str, dict]]) -> list[str]:
-    """Joint names of a multi-joint recording of ``actuator_node`` (``joints`` in its metadata), else []."""
-    names: list[str] = []
-    for name, rec in metadata:
-        if name == "bldc_actuator" and rec.get("joints") and "," in rec["joints"]:
-            names = rec["joints"].split(",")
-    return names
-
-
 def _joint_parameters(flat: dict | None, joint: str) -> dict | None:
     """One joint's model parameters from the flat parameters of a multi-joint recording."""
     if not flat:
