@@ -93,12 +93,6 @@ def to_records(arr: np.ndarray) -> list[Record]:
     return [Record({name: _python_value(row[name]) for name in arr.dtype.names}) for row in arr]
 
 
-def from_records(records: list[Record], arr: np.ndarray) -> None:
-    """Write the fields of ``records`` back into the structured array ``arr`` (in place)."""
-    for name in arr.dtype.names:
-        arr[name] = [getattr(r, name) for r in records]
-
-
 # -- the optional terms, compiled from effects.py -------------------------------------------------------
 
 _friction_magnitude = jit(effects.friction_magnitude)
