@@ -118,3 +118,20 @@ def test_the_simulation_gate_refuses_what_the_simulation_does_not_confirm():
     why = [r for r in rep.rejected if r["effect"] == "coulomb_friction" and r.get("verdict")]
     assert why and why[0]["verdict"] == "not_confirmed_in_simulation" and "noise floor" in why[0]["reason"]
     assert rep.updated_params.effects.coulomb_friction == T.NOMINAL.effects.coulomb_friction
+
+
+def test_a_recording_of_another_motor_says_the_base_model_is_far_off():
+    """Issue #7, symptom 4: the built-in default motor's recording diagnosed against ak80_9 (different in every
+    parameter) must say the base model is far off in several core values, not offer one tidy effect; the same
+    recording against its own parameters does not."""
+    import test_diagnosis_analysis as T
+    from bldc_actuator.diagnosis.pipeline import diagnose
+    from bldc_actuator.params import load_preset
+
+    truth = T.NOMINAL
+    sig = T.make_recording(truth, seed=13)
+    wrong = load_preset("ak80_9").replace(**{"gear.gear_ratio": truth.gear.gear_ratio})
+    rep = diagnose(sig, wrong)
+    assert rep.verdict.startswith("base model far off")
+    assert "phase_resistance" in rep.verdict and "torque_constant_q" in rep.verdict
+    assert not diagnose(sig, truth).verdict.startswith("base model far off")

@@ -33,7 +33,7 @@ from ..params import ActuatorParams
 from . import candidates as cands
 from . import equation_error as ee
 from . import locate as loc_mod
-from . import judge, refit, significance
+from . import base_model, judge, refit, significance
 from .report import DiagnosisReport
 from .selection import GateConfig, fit_model, forward_select
 
@@ -240,6 +240,7 @@ def _diagnose(signals, params: ActuatorParams, options: DiagnoseOptions) -> Diag
             sel.final_fit = ff.fit
             pars = refit.effect_parameters(ctx, sel, ff, lib)
     new_params, param_notes, not_sim = refit.updated_params(ctx, sel, pars, lib)
+    base = base_model.check(ctx)   # several core values far off: say so before any effect
     if thermal["findings"]:
         new_params, tnotes, tns = refit.apply_thermal(new_params, thermal)
         param_notes += tnotes
@@ -302,7 +303,8 @@ def _diagnose(signals, params: ActuatorParams, options: DiagnoseOptions) -> Diag
         rejected=sel.rejected + thermal["rejected"] + [{"effect": v.effect, "form": "practical significance",
                                                          "verdict": v.kind, "reason": v.message} for v in verdicts],
         data_issues=data_issues, not_checkable=sel.not_checkable + thermal["not_checkable"], aliases=aliases,
-        verdict=verdict, notes=ctx.notes + param_notes, compare=compare, locate=located,
+        verdict=(base["message"] + "; " + verdict) if base else verdict,
+        notes=ctx.notes + param_notes + ([base["message"]] if base else []), compare=compare, locate=located,
         rounds=sel.rounds, correlations=ff.correlations, not_simulated=not_sim, timing=timing,
         updated_params=new_params, nominal_params=params,
         setup={"rate_hz": ctx.fs, "cutoff_hz": ctx.dec.fc, "decimation": ctx.dec.q, "samples": int(len(ctx.t)),
