@@ -28,6 +28,8 @@ def check(ctx, limit: float = 0.15) -> dict[str, Any] | None:
     if len(y) < 50 or np.std(X[:, 2]) == 0 or np.std(X[:, 0]) == 0:
         return None
     coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    if coef[0] <= 0 or coef[2] <= 0:
+        return None   # R or K not positive: current and speed too alike in this data to separate them
     m = ctx.params.motor
     nominal = {"phase_resistance": m.phase_resistance, "torque_constant_q": m.torque_constant_q}
     identified = {"phase_resistance": float(coef[0]), "torque_constant_q": float(coef[2])}
