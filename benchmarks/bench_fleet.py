@@ -23,44 +23,11 @@ sys.path.insert(0, str(HERE.parent))
 from benchmarks import fleet_gen as G  # noqa: E402
 from bldc_actuator.cli import main as cli  # noqa: E402
 
-OUTPUT_MAP = HERE / "fleet_profiles" / "output_csv.map.yaml"
-
-
-def _has_profiles() -> bool:
-    from bldc_actuator.diagnosis import loaders
-
-    return hasattr(loaders, "joints")
-
-
-WIDE_MAP = """time: time
-position: Position{j}*9
-velocity: Velocity{j}*9
-current: Cur{j}
-current_command: CurCmd{j}
-housing_temperature: Temp{j}
-"""
-
-
 def runs(root: Path, work: Path) -> list[tuple[str, list[str], str | None]]:
-    """(label, extra CLI args, actuator-id suffix) per run: one run over every file when input profiles
-    exist (auto-detected per file); without them (a build before profiles), one run per format a plain
-    mapping reads, and the wide CSV one joint at a time (a mapping per joint; the run's path-based id
-    ``robot2`` gets the joint appended for the check)."""
+    """(label, extra CLI args, actuator-id suffix) per run: one run over every file, each read by the input
+    profile its header matches (node MCAP, wide multi-joint CSV, output-side CSV)."""
     params = ["--params", str(root / "params.yaml")]
-    if _has_profiles():
-        return [("all formats", [str(root / "**" / "*.mcap"), str(root / "**" / "*.csv"), *params], None)]
-    out = [("mcap", [str(root / "**" / "*.mcap"), *params], None),
-           ("output_csv", [str(root / "robot[35]" / "**" / "*.csv"), *params, "--map", str(OUTPUT_MAP)], None)]
-    truth = json.loads((root / "truth.json").read_text())
-    for a in truth["actuators"]:
-        if a["format"] == "wide_csv":
-            robot, joint = a["actuator_id"].split("/")
-            j = int(joint.replace("joint", ""))
-            m = work / f"wide_joint{j}.map.yaml"
-            m.parent.mkdir(parents=True, exist_ok=True)
-            m.write_text(WIDE_MAP.format(j=j))
-            out.append((f"wide_j{j}", [str(root / robot / "*_joints.csv"), *params, "--map", str(m)], joint))
-    return out
+    return [("all formats", [str(root / "**" / "*.mcap"), str(root / "**" / "*.csv"), *params], None)]
 
 
 def check(truth: dict, alerts: list[dict], tested: list[dict]) -> dict:

@@ -23,12 +23,14 @@ from pathlib import Path
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "test"))
 
 import numpy as np  # noqa: E402
 
 from bldc_actuator import frames  # noqa: E402
 from bldc_actuator import params as P  # noqa: E402
-from bldc_actuator.diagnosis import realdata, steady_state as ss  # noqa: E402
+import realdata_files as realdata  # noqa: E402  (names -> files; files are read by their input profiles)
+from bldc_actuator.diagnosis import steady_state as ss  # noqa: E402
 from bldc_actuator.diagnosis.pipeline import DiagnoseOptions, diagnose  # noqa: E402
 
 ANGLE_EFFECTS = ["cogging_torque", "electrical_angle_ripple", "position_dependent_load"]

@@ -295,7 +295,7 @@ def test_foreign_mcap_with_mapping_and_variable_layout(recorder, tmp_path):
 # ------------------------------------------------------------------------------------------- real data
 
 def test_ak80_9_glitch_files(shared_data_dir):
-    from bldc_actuator.diagnosis import realdata
+    import realdata_files as realdata
 
     s2 = realdata.load_dataset("ak80-9/sysid_final/trial2", shared_data_dir)
     out = [i for i in _issues(s2, "outlier", "current") if "physical limit" in i.detail]
@@ -322,7 +322,7 @@ def test_ak80_9_glitch_files(shared_data_dir):
 
 
 def test_ak80_9_torque_vs_angle_and_servo_efficiency(shared_data_dir):
-    from bldc_actuator.diagnosis import realdata
+    import realdata_files as realdata
 
     s = realdata.load_dataset("ak80-9/torque_vs_angle/synchronized_trial_4", shared_data_dir)
     pos = s.channels["position"]
@@ -337,7 +337,7 @@ def test_ak80_9_torque_vs_angle_and_servo_efficiency(shared_data_dir):
 
 
 def test_odrive_map_steady_state_points(shared_data_dir):
-    from bldc_actuator.diagnosis import realdata
+    import realdata_files as realdata
 
     s = realdata.load_dataset("odrive-d5065/odrive_data", shared_data_dir)
     assert len(s.time) == 344 and s.meta["steady_state_points"] is True
@@ -351,7 +351,7 @@ def test_odrive_map_steady_state_points(shared_data_dir):
 
 
 def test_benkatz_logs_plausible(shared_data_dir):
-    from bldc_actuator.diagnosis import realdata
+    import realdata_files as realdata
 
     s = realdata.load_dataset("benkatz-dyno/u8_pro_emap", shared_data_dir)
     assert s.rate() == pytest.approx(200, rel=0.05) and s.meta["sampling"]["irregular"]
@@ -363,8 +363,8 @@ def test_benkatz_logs_plausible(shared_data_dir):
     assert np.nanmedian(v.channels["current"]) == pytest.approx(4.0, abs=0.1)   # mA -> A
 
 
-def test_dataset_registry_and_path_dispatch(shared_data_dir):
-    from bldc_actuator.diagnosis import realdata
+def test_dataset_registry_and_profile_detection(shared_data_dir, tmp_path):
+    import realdata_files as realdata
 
     infos = {i.name: i for i in realdata.list_datasets(shared_data_dir)}
     assert {"ak80-9/sysid_final/trial2", "odrive-d5065/odrive_data", "benkatz-dyno/friction_test",
@@ -372,8 +372,17 @@ def test_dataset_registry_and_path_dispatch(shared_data_dir):
     assert infos["ak80-9/sysid_final/trial2"].licence == "GPL-3.0"
     assert infos["benkatz-dyno/friction_test"].licence == "MIT"
     assert infos["odrive-d5065/odrive_data"].kind == "steady_state_points"
-    # load() recognises a dataset file by its path and applies the adapter (output -> motor side etc.)
-    raw = load(shared_data_dir / "ak80-9" / "sysid_final" / "trial5.csv")
+    # load() recognises every file by its header alone (its input profile), never by its folder: a copy
+    # elsewhere under another name reads the same (output -> motor side etc.)
+    import shutil
+
+    copy = tmp_path / "anything.csv"
+    shutil.copy(shared_data_dir / "ak80-9" / "sysid_final" / "trial5.csv", copy)
+    raw = load(copy)
+    assert raw.meta["profile"] == "tmotorcan_mit_log" and raw.meta["profile_how"].startswith("auto")
     assert raw.meta["gear_ratio"] == 9.0 and "clean_limits" in raw.meta
+    for info in realdata.list_datasets(shared_data_dir):
+        if info.path.endswith(".csv"):
+            assert load(info.path).meta.get("profile"), info.name
     with pytest.raises(KeyError, match="no dataset named"):
         realdata.load_dataset("ak80-9/nope", shared_data_dir)

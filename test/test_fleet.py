@@ -22,7 +22,6 @@ sys.path.insert(0, str(REPO))
 from benchmarks import fleet_gen as G  # noqa: E402
 from bldc_actuator.fleet import trends  # noqa: E402
 
-OUTPUT_MAP = REPO / "benchmarks" / "fleet_profiles" / "output_csv.map.yaml"
 
 
 # ------------------------------------------------------------------------------------ trend test
@@ -56,13 +55,12 @@ def rclpy_ok():
     pytest.importorskip("sensor_msgs.msg")
 
 
-def _track_file(path, params, mapping=None):
+def _track_file(path, params):
     from bldc_actuator.diagnosis.cleaning import clean
-    from bldc_actuator.diagnosis.loaders import Mapping, load
+    from bldc_actuator.diagnosis.loaders import load
     from bldc_actuator.fleet.health import track
 
-    m = Mapping.from_yaml(mapping) if mapping else None
-    return {t.parameter: t for t in track(clean(load(path, mapping=m, params=params), params=params), params)}
+    return {t.parameter: t for t in track(clean(load(path, params=params), params=params), params)}
 
 
 def test_tracked_parameters_recover_planted_values(rclpy_ok, tmp_path):
@@ -88,7 +86,7 @@ def test_tracked_parameters_recover_planted_values(rclpy_ok, tmp_path):
         if par != "phase_resistance":
             assert abs(t.nominal - v) > 3 * t.uncertainty + 0.03 * abs(v)
         assert t.heldout_after <= t.heldout_before * 1.001 or par == "phase_resistance"
-    csv = _track_file(tmp_path / "a.csv", nominal, OUTPUT_MAP)
+    csv = _track_file(tmp_path / "a.csv", nominal)          # output-side angles: read by its profile
     for par in ("coulomb_friction", "torque_constant_q"):
         assert csv[par].status == "ok"
         assert abs(csv[par].value - want[par]) <= 3 * csv[par].uncertainty + 0.04 * want[par], (par, csv[par].value)

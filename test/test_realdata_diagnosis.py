@@ -7,7 +7,8 @@ import pytest
 
 from bldc_actuator import frames
 from bldc_actuator import params as P
-from bldc_actuator.diagnosis import realdata, steady_state as ss
+import realdata_files as realdata
+from bldc_actuator.diagnosis import steady_state as ss
 from bldc_actuator.diagnosis.pipeline import DiagnoseOptions, diagnose
 
 
@@ -85,7 +86,6 @@ def test_angle_trial_all_effects_no_runaway_torque_constant(shared_data_dir):
     scale that only fits because a constant load runs away with it (they are one column here): the
     joint fit is checked for plausibility and the selection redone without the implausible term."""
     from bldc_actuator import params as P
-    from bldc_actuator.diagnosis import realdata
     from bldc_actuator.diagnosis.pipeline import DiagnoseOptions, diagnose
 
     s = realdata.load_dataset("ak80-9/torque_vs_angle/synchronized_trial_4", shared_data_dir)

@@ -25,7 +25,7 @@ What :func:`clean` does, in order
    |voltage| > 2 x bus voltage, bus voltage <= 0, |torque| > 3 x K_t_q x current_limit x gear ratio.
    ``limits`` overrides any of them per channel: ``{"current": 60}`` (symmetric) or
    ``{"bus_voltage": (5, 60)}``; a recording's ``meta["clean_limits"]`` (set by the real-data adapters
-   from each dataset's SOURCE.txt) applies unless ``limits`` says otherwise.
+   from its input profile, e.g. a dataset's SOURCE.txt) applies unless ``limits`` says otherwise.
 6. spikes (Hampel on a 7-sample window): a sample more than ``spike_sigma`` robust sigmas (local MAD,
    floored by the noise of the first differences, by 4 quantisation steps and by 10 % of the channel's
    size (max of p1..p99 range and 99th-percentile magnitude): gross errors only) from the
@@ -40,6 +40,7 @@ What :func:`clean` does, in order
 from __future__ import annotations
 
 import math
+import re
 from typing import Any
 
 import numpy as np
@@ -622,7 +623,7 @@ def clean(raw: Signals, limits: dict | None = None, params=None) -> Signals:
     """Detect and report problems; mask impossible samples; return a new :class:`Signals` whose time is
     strictly increasing and split into gap-free segments. ``params`` (ActuatorParams) sets the physical
     limits; ``limits`` overrides them (see module docstring)."""
-    # a recording may carry its own limits (realdata adapters: from the dataset's SOURCE.txt)
+    # a recording may carry its own limits (its input profile's clean_limits)
     ctx = _Ctx(raw, {**raw.meta.get("clean_limits", {}), **(limits or {})}, params)
     n_in = len(raw.time)
     idx, dropped, forced = _clean_time(ctx, raw)
@@ -729,4 +730,23 @@ def clean(raw: Signals, limits: dict | None = None, params=None) -> Signals:
     meta["notes"] = ctx.notes
     meta["cleaned"] = True
     meta["unit_suspects"] = sorted(ctx.exempt)
+    _profile_fix_hints(ctx.issues, raw.meta)
     return Signals(t, ch, raw.source, ctx.issues, segments, meta)
+
+
+_FIX_CHANNEL = re.compile(r"--map (\w+)=")
+
+
+def _profile_fix_hints(issues: list[DataIssue], meta: dict) -> None:
+    """A recording read through an input profile is fixed in the profile, not with --map: say which field."""
+    name = meta.get("profile")
+    if not name:
+        return
+    where = meta.get("profile_path") or name
+    for i in issues:
+        if i.kind not in ("unit_suspect", "sign_convention") or "--map" not in i.action:
+            continue
+        m = _FIX_CHANNEL.search(i.action)
+        ch = m.group(1) if m else i.channel
+        i.action += (f"; this file was read by input profile {name}: fix its columns.{ch} / units.{ch} / "
+                     f"side.{ch} ({where}) or pass --map {ch}=... to override")

@@ -1,6 +1,7 @@
 """``bldc-actuator diagnose``: the command-line face of :func:`.pipeline.diagnose`.
 
-    bldc-actuator diagnose RECORDING --params PARAMS.yaml [--map CANONICAL=EXPR ...] [--map-file F]
+    bldc-actuator diagnose RECORDING --params PARAMS.yaml [--profile NAME|FILE] [--joint NAME]
+                           [--map CANONICAL=EXPR ...] [--map-file F]
                            --json REPORT.json --report DIR [--updated-params OUT.yaml]
                            [--effects a,b] [--holdout FRACTION | --holdout-file F]
 
@@ -27,7 +28,11 @@ def register(subparsers) -> None:
     p.add_argument("--params", required=True, metavar="PARAMS.yaml",
                    help="nominal parameters: a parameter file (the node's YAML), a preset name, 'defaults' "
                         "(the built-in defaults) or 'recording' (the parameters stored in this MCAP recording)")
-    p.add_argument("--joint", metavar="NAME", help="the joint to diagnose in a multi-joint actuator_node recording")
+    p.add_argument("--joint", metavar="NAME", help="the joint to diagnose in a file of several actuators (an "
+                                                   "actuator_node recording of several joints, a wide CSV)")
+    p.add_argument("--profile", metavar="NAME|FILE",
+                   help="input profile (YAML) saying how the log's columns become canonical channels; default: "
+                        "auto-detected from the header (the chosen one is printed); see docs/realdata.md")
     p.add_argument("--map", action="append", default=[], metavar="CANONICAL=EXPR",
                    help="rename/scale a column, e.g. velocity=speed*9 (repeatable)")
     p.add_argument("--map-file", metavar="F", help="YAML mapping {canonical: expression}")
@@ -62,10 +67,13 @@ def _fail(msg: str) -> int:
     return 2
 
 
-def _load(path: str, mapping, params, joint=None):
+def _load(path: str, mapping, params, joint=None, profile=None, progress=False):
     from . import cleaning, loaders
 
-    raw = loaders.load(path, mapping=mapping, params=params, joint=joint)
+    raw = loaders.load(path, mapping=mapping, params=params, joint=joint, profile=profile)
+    if progress and raw.meta.get("profile"):
+        print(f"[diagnose] input profile: {raw.meta['profile']} ({raw.meta.get('profile_how', '')}; "
+              f"{raw.meta.get('profile_path', '')})", file=sys.stderr, flush=True)
     if params is None:   # --params recording
         params = raw.meta.get("params_from_recording")
         if params is None:
@@ -112,8 +120,9 @@ def run(args) -> int:
     try:
         if progress:
             print(f"[diagnose] loading {args.recording}", file=sys.stderr, flush=True)
-        signals, params = _load(args.recording, mapping, params, args.joint)
-        holdout_signals = _load(args.holdout_file, mapping, params, args.joint)[0] if args.holdout_file else None
+        signals, params = _load(args.recording, mapping, params, args.joint, args.profile, progress)
+        holdout_signals = (_load(args.holdout_file, mapping, params, args.joint, args.profile)[0]
+                           if args.holdout_file else None)
     except (ValueError, OSError) as exc:    # LoadError is a ValueError
         return _fail(str(exc))
     if not (0.0 <= args.tolerance < 1.0):

@@ -3,7 +3,7 @@
 
 Canonical channels (:data:`CANONICAL`) are SI and on the MOTOR side unless the name says otherwise
 (``torque``, ``torque_command`` and ``load_torque`` are at the OUTPUT, after the gear). Loaders
-(:mod:`.loaders`, :mod:`.realdata`) translate recordings into these names; :func:`.cleaning.clean` finds
+(:mod:`.loaders`, through :mod:`.input_profiles` for foreign formats) translate recordings into these names; :func:`.cleaning.clean` finds
 and reports problems. A masked sample is ``NaN``: it stays in the arrays (so indices and time line up)
 and is excluded from fits.
 

@@ -17,7 +17,6 @@ start time    ``Signals.start_time`` with ``Signals.start_time_source`` (the rec
 from __future__ import annotations
 
 import datetime as dt
-import inspect
 import os
 import re
 from pathlib import Path
@@ -31,48 +30,15 @@ WALL_CLOCK_EPOCH = dt.datetime(2000, 1, 1, tzinfo=dt.timezone.utc)
 _EPOCH = re.compile(r"(?<!\d)(1[3-9]\d{8})(\.\d+)?(?!\d)")
 
 
-def _accepts(func, name: str) -> bool:
-    try:
-        return name in inspect.signature(func).parameters
-    except (TypeError, ValueError):
-        return False
-
-
 def joints(path: str | Path, profile=None) -> list[str | None]:
-    """Joint names in a file (``[None]`` for a single-joint recording)."""
-    func = getattr(loaders, "joints", None)
-    if func is None:
-        return _node_mcap_joints(path)
-    found = func(path, profile=profile) if _accepts(func, "profile") else func(path)
-    found = list(found or [])
+    """Joint names in a file (``[None]`` for a single-actuator recording)."""
+    found = list(loaders.joints(path, profile=profile) or [])
     return found if found else [None]
-
-
-def _node_mcap_joints(path: str | Path) -> list[str | None]:
-    """A recording of several joints by ``actuator_node`` (one ``~/<joint>/q_axis_state`` per joint, as
-    the loader itself recognises them), else ``[None]``. Used when the loaders have no ``joints()``."""
-    p = Path(path)
-    if p.suffix.lower() != ".mcap" or not _accepts(loaders.load, "joint") or not hasattr(loaders, "_mcap_topics"):
-        return [None]
-    topics = loaders._mcap_topics(p)
-    q = [t for t in topics if t.endswith("/q_axis_state")]
-    if len(q) > 1 and any(t.endswith("joint_states") for t in topics):
-        return sorted(t.rsplit("/", 2)[-2] for t in q)
-    return [None]
 
 
 def load(path: str | Path, *, joint=None, profile=None, mapping=None, params=None):
     """Raw Signals of one joint of one file (see :func:`loaders.load`)."""
-    kw = {"mapping": mapping, "params": params}
-    if profile is not None:
-        if not _accepts(loaders.load, "profile"):
-            raise loaders.LoadError(f"{path}: --profile {profile}: this build has no input profiles")
-        kw["profile"] = profile
-    if joint is not None:
-        if not _accepts(loaders.load, "joint"):
-            raise loaders.LoadError(f"{path}: joint {joint!r}: this build cannot select joints")
-        kw["joint"] = joint
-    return loaders.load(path, **kw)
+    return loaders.load(path, mapping=mapping, params=params, profile=profile, joint=joint)
 
 
 def actuator_id(signals, path: str | Path, root: str | Path | None, joint=None) -> str:
@@ -94,9 +60,10 @@ def actuator_id(signals, path: str | Path, root: str | Path | None, joint=None) 
 
 def start_time(signals, path: str | Path) -> tuple[dt.datetime, str]:
     """(UTC datetime, source) -- see the module docstring for the order."""
-    st = getattr(signals, "start_time", None)
+    meta = getattr(signals, "meta", {}) or {}
+    st = getattr(signals, "start_time", None) or meta.get("start_time")
     if st is not None:
-        src = getattr(signals, "start_time_source", None) or "recording"
+        src = getattr(signals, "start_time_source", None) or meta.get("start_time_source") or "recording"
         when = _as_datetime(st)
         if when is not None and when >= WALL_CLOCK_EPOCH:
             return when, str(src)
