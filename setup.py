@@ -59,6 +59,7 @@ setup(
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml"))),
         (f"share/{PACKAGE}/config/foxglove", sorted(glob("config/foxglove/*.json"))),
+        (f"share/{PACKAGE}/config/input_profiles", sorted(glob("config/input_profiles/*.yaml"))),
     ],
     install_requires=["setuptools"],
     extras_require={"sim": SIM, "wheels": SIM + ROS_WHEELS, "test": TEST},

@@ -106,6 +106,9 @@ def test_colcon_build_installs_ros_layout(colcon_install_prefix: Path):
     assert (share / "package.xml").read_bytes() == (REPO_ROOT / "package.xml").read_bytes()
     assert (prefix / "share" / "ament_index" / "resource_index" / "packages" / PACKAGE).is_file()
     assert {p.name for p in (share / "config").glob("*.yaml")} == source_presets()
+    # the input profiles (log formats as data) ship with it, every one
+    assert {p.name for p in (share / "config" / "input_profiles").glob("*.yaml")} == \
+        {p.name for p in (REPO_ROOT / "config" / "input_profiles").glob("*.yaml")} != set()
     assert list(prefix.glob(f"lib/python3*/site-packages/{PACKAGE}/__init__.py"))
 
 

@@ -129,6 +129,10 @@ def run(args) -> int:
         return _fail(f"--tolerance: expected a fraction 0 <= f < 1, got {args.tolerance!r}")
     if not (args.max_uncertainty > 0.0):
         return _fail(f"--max-uncertainty: expected a fraction > 0, got {args.max_uncertainty!r}")
+    from . import torque_balance
+
+    if torque_balance.applicable(signals):
+        return _run_torque_balance(signals, params, args)
     options = DiagnoseOptions(effects=effects, holdout=args.holdout, holdout_signals=holdout_signals,
                               cutoff_hz=args.cutoff, window_s=args.window, progress=progress,
                               tolerance=args.tolerance, max_relative_uncertainty=args.max_uncertainty,
@@ -144,6 +148,38 @@ def run(args) -> int:
     if args.updated_params and report.updated_params is not None:
         report.write_params(args.updated_params)
     _print_summary(report, args)
+    return 0
+
+
+def _run_torque_balance(signals, params, args) -> int:
+    """Torque and motion but no current: cogging and friction from the torque balance."""
+    import json
+
+    from . import torque_balance
+
+    res = torque_balance.diagnose(signals, params, holdout=args.holdout)
+    doc = {"recording": signals.source, "profile": signals.meta.get("profile"), **res.to_dict(),
+           "data_issues": signals.to_json_issues()}
+    print(f"torque balance (no motor current logged): {len(res.findings)} finding(s); R^2 {res.r2:.3f}; "
+          f"held-out torque RMS {_fmt(res.held_out.get('nominal'))} (given parameters) -> "
+          f"{_fmt(res.held_out.get('after'))} N*m")
+    for f in res.findings:
+        pars = ", ".join(f"{k}={_fmt(v)}±{_fmt(f.uncertainty.get(k))}" for k, v in f.parameters.items())
+        print(f"  {f.effect}: {pars}; held-out torque RMS {_fmt(f.held_out['before'])} -> {_fmt(f.held_out['after'])} N*m")
+    for f in res.rejected:
+        print(f"  not accepted: {f.effect}: {f.reason}")
+    for x in res.not_checkable:
+        print(f"  not checkable: {x['effect']}: {x['reason']}")
+    for n in res.notes:
+        print(f"  note: {n}")
+    if args.json:
+        Path(args.json).write_text(json.dumps(doc, indent=1, default=float))
+        print(f"  wrote json: {args.json}")
+    if args.updated_params:
+        from ..params import dump_yaml
+
+        dump_yaml(torque_balance.updated_params(params, res), args.updated_params)
+        print(f"  wrote updated params: {args.updated_params}")
     return 0
 
 

@@ -399,7 +399,12 @@ def read(path: str | Path, profile: InputProfile, params=None, joint: str | None
             aux[name] = _normalise_negative_index(hit, width)
     time_spec = profile.time or {}
     if "column" in time_spec:
-        mapping.add("time", str(time_spec["column"]))
+        alts = _alternatives(time_spec["column"])
+        hit = next((e for e, _ in alts if _column_exists(e, header, headerless, width)), None)
+        if hit is None:
+            raise LoadError(f"{where}: time.column: none of {', '.join(e for e, _ in alts)} is in the file "
+                            f"(columns: {', '.join(header_list)})")
+        mapping.add("time", _normalise_negative_index(hit, width))
     rate = time_spec.get("rate_hz") or (1.0 if time_spec.get("index") else None)
     sig = load_csv(path, mapping, params, aux=aux, only_mapped=True, skip_lines=skip,
                    units_row=bool(profile.layout.get("units_row")), time_rate=rate)
@@ -411,7 +416,7 @@ def read(path: str | Path, profile: InputProfile, params=None, joint: str | None
         sig.meta["time_is_index"] = True
     if len(sig.time) and time_spec.get("epoch"):
         sig.meta["start_time"] = dt.datetime.fromtimestamp(float(sig.time[0]), dt.timezone.utc).isoformat()
-        sig.meta["start_time_source"] = f"recording's clock (column {time_spec['column']}, Unix time)"
+        sig.meta["start_time_source"] = f"recording's clock (column {sig.meta['mapping'].get('time')}, Unix time)"
     if len(sig.time) and time_spec.get("zero_start"):
         t0 = float(sig.time[0])
         sig.time = sig.time - t0

@@ -12,7 +12,9 @@ UTC), ``start_time_source``, ``source`` (``tracked``: the health estimator of :m
 recording; ``finding``: a parameter of an effect ``diagnose`` accepted), ``effect``, ``parameter``,
 ``value``, ``uncertainty`` (1 sigma), ``unit``, ``nominal``, ``heldout_before``, ``heldout_after``,
 ``heldout_metric``, ``accepted`` (``diagnose`` accepted this effect in this recording), ``status`` (``ok``,
-``not_checkable``, ``failed``), ``reason``, ``profile``, ``params_file``.
+``not_checkable``, ``not_identifiable``, ``failed``), ``reason``, ``profile`` (the input profile that read the
+file, given or auto-detected), ``params_file``. A log with torque and motion but no current is diagnosed by
+the torque balance (:mod:`bldc_actuator.diagnosis.torque_balance`); its rows are ``finding`` rows.
 """
 
 from __future__ import annotations
@@ -142,6 +144,12 @@ def _process_joint(job: Job, joint, mapping) -> tuple[list[dict], list[dict]]:
     when, when_src = source.start_time(raw, job.path)
     sig = clean(raw, params=params)
     base = _base_row(job, joint, aid, when.isoformat(), when_src, pf)
+    base["profile"] = raw.meta.get("profile") or job.profile or ""      # the input profile that read it
+    from ..diagnosis import torque_balance
+
+    if torque_balance.applicable(sig):          # torque and motion, no current: the torque balance
+        res = torque_balance.diagnose(sig, params, holdout=job.holdout)
+        return _torque_balance_rows(base, res), []
     from ..diagnosis import equation_error as ee
 
     ctx = ee.prepare([(sig, False)], params, holdout=job.holdout)
@@ -180,6 +188,25 @@ def _process_joint(job: Job, joint, mapping) -> tuple[list[dict], list[dict]]:
                                  heldout_metric=str(ho.get("metric", "")) + (f" [{ho['unit']}]" if ho.get("unit") else ""),
                                  accepted=True, status="ok", reason=""))
     return rows, failures
+
+
+def _torque_balance_rows(base: dict, res) -> list[dict]:
+    rows = []
+    for f, accepted in [(f, True) for f in res.findings] + [(f, False) for f in res.rejected if f.parameters]:
+        ho = f.held_out
+        for name, value in f.parameters.items():
+            rows.append(dict(base, source="finding", effect=f.effect, parameter=name, value=_f(value),
+                             uncertainty=_f(f.uncertainty.get(name)), unit=str(f.units.get(name, "")),
+                             nominal=float("nan"), heldout_before=_f(ho.get("before")),
+                             heldout_after=_f(ho.get("after")), heldout_metric="torque_rms [N*m]",
+                             accepted=accepted, status="ok" if accepted else "not_identifiable",
+                             reason=f.reason or "torque balance (no motor current)"))
+    if not rows:
+        rows.append(dict(base, source="finding", effect="", parameter="", value=float("nan"),
+                         uncertainty=float("nan"), unit="", nominal=float("nan"), heldout_before=float("nan"),
+                         heldout_after=float("nan"), heldout_metric="torque_rms [N*m]", accepted=False,
+                         status="not_checkable", reason="torque balance: " + "; ".join(res.notes[-2:])))
+    return rows
 
 
 # ------------------------------------------------------------------------------------------ Dask

@@ -1,0 +1,372 @@
+"""Diagnosis of a log with shaft torque and angle/speed but no motor current: cogging and friction from the
+torque balance.
+
+A dynamometer cogging run, a motor unpowered (or position-held by its drive with the current not logged)
+and turned by something else: the torque sensor then reads what the motor itself resists. With the
+motor-side speed ω, angle θ and acceleration α = dω/dt, and the gear ratio N (torque at the output)::
+
+    τ_sensor = -N [ τ_c sign(ω) + b ω + J α + τ_cog(θ) ] + τ_0
+
+(τ_c Coulomb friction, b viscous damping, J rotor inertia, τ_cog the cogging torque
+:func:`bldc_actuator.effects.cogging_torque` with N_c periods per revolution, τ_0 a sensor offset). The
+sign is the canonical one (positive = the actuator drives in +): a motor that only resists gives a
+sensor torque opposite to its motion. When no encoder column exists the angle is integrated from the
+speed per segment (said so in the result: its phase is relative and it drifts with the speed sensor's
+offset). A term is accepted when it lowers the BIC by more than 10 and improves the held-out torque
+(interleaved blocks). The cogging order is the peak of the angle-order spectrum of the friction-only
+residual; its harmonics k = 1.. are added while each is accepted.
+
+What this cannot do, and says: without current it cannot separate the motor's own electromagnetic torque
+— when the balance explains little of the torque (R² < 0.5) the motor was probably powered and the
+findings are marked not identifiable; with motion in one direction only, Coulomb friction and a sensor
+offset are one column (reported as a drag, with the experiment that separates them).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..effects import cogging_torque
+from .signals import Signals
+
+BIC_GATE = 10.0
+
+
+def applicable(sig: Signals) -> bool:
+    """Torque and motion are logged, current is not (nor a current command)."""
+    ch = sig.channels
+
+    def has(n):
+        return n in ch and np.isfinite(ch[n]).sum() >= 20
+
+    return has("torque") and (has("velocity") or has("position")) and not has("current")
+
+
+@dataclass
+class Term:
+    effect: str
+    parameters: dict
+    uncertainty: dict
+    units: dict
+    held_out: dict
+    delta_bic: float
+    accepted: bool
+    reason: str = ""
+
+
+@dataclass
+class TorqueBalanceResult:
+    findings: list[Term]
+    rejected: list[Term]
+    notes: list[str]
+    angle_source: str
+    r2: float
+    held_out: dict
+    not_checkable: list[dict] = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        def t(x: Term) -> dict:
+            return {"effect": x.effect, "parameters": x.parameters, "uncertainty": x.uncertainty, "units": x.units,
+                    "held_out": x.held_out, "delta_bic": x.delta_bic, "reason": x.reason, "simulated": True}
+
+        return {"method": "torque balance (no motor current)", "angle_source": self.angle_source,
+                "r2": self.r2, "held_out": self.held_out, "findings": [t(x) for x in self.findings],
+                "rejected": [t(x) for x in self.rejected], "not_checkable": self.not_checkable,
+                "notes": self.notes}
+
+
+# ----------------------------------------------------------------------------------------- signals
+
+def _per_segment(sig: Signals, f) -> np.ndarray:
+    out = np.full(len(sig.time), np.nan)
+    for a, b in sig.segments:
+        if b - a >= 5:
+            out[a:b] = f(sig.time[a:b], a, b)
+    return out
+
+
+def motion(sig: Signals) -> tuple[np.ndarray, np.ndarray, np.ndarray, str]:
+    """(θ, ω, α, how the angle was obtained) on the motor side."""
+    from scipy.signal import savgol_filter
+
+    ch = sig.channels
+    w = ch.get("velocity")
+    th = ch.get("position")
+    how = "position channel (encoder)"
+    if w is None or not np.isfinite(w).any():
+        w = _per_segment(sig, lambda t, a, b: np.gradient(_fill(th[a:b]), t))
+        how += "; speed differentiated from it"
+    if th is None or not np.isfinite(th).any():
+        def integ(t, a, b):
+            v = _fill(w[a:b])
+            return np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))])
+        th = _per_segment(sig, integ)
+        how = ("integrated from the speed (no encoder column): phase relative to the start of each segment, "
+               "drifts with the speed sensor's offset")
+
+    def acc(t, a, b):
+        v = _fill(w[a:b])
+        n = b - a
+        win = min(n - (1 - n % 2), max(5, int(round(0.02 / max(np.median(np.diff(t)), 1e-9))) | 1))
+        if win < 5:
+            return np.gradient(v, t)
+        return savgol_filter(v, win, 2, deriv=1, delta=float(np.median(np.diff(t))))
+    return th, w, _per_segment(sig, acc), how
+
+
+def _fill(x: np.ndarray) -> np.ndarray:
+    x = np.asarray(x, float).copy()
+    ok = np.isfinite(x)
+    if ok.all() or not ok.any():
+        return np.nan_to_num(x)
+    idx = np.arange(len(x))
+    x[~ok] = np.interp(idx[~ok], idx[ok], x[ok])
+    return x
+
+
+def _blocks(n: int, frac: float, nblocks: int = 10) -> np.ndarray:
+    """Held-out mask: interleaved blocks, a fraction ``frac`` of the samples."""
+    edges = np.linspace(0, n, 2 * nblocks + 1).astype(int)
+    mask = np.zeros(n, bool)
+    period = 1.0 / frac
+    k = 0
+    for i in range(len(edges) - 1):
+        if (i + 0.5) % period < 1.0:
+            mask[edges[i]:edges[i + 1]] = True
+            k += 1
+    return mask
+
+
+def _lstsq(X: np.ndarray, y: np.ndarray):
+    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    r = y - X @ coef
+    dof = max(1, len(y) - X.shape[1])
+    s2 = float(r @ r) / dof
+    try:
+        cov = s2 * np.linalg.inv(X.T @ X)
+    except np.linalg.LinAlgError:
+        cov = np.full((X.shape[1], X.shape[1]), np.nan)
+    return coef, cov, r
+
+
+def _bic(rss: float, n: int, k: int) -> float:
+    return n * math.log(max(rss, 1e-300) / n) + k * math.log(n)
+
+
+PEAK_OVER_MEDIAN = 5.0
+
+
+def _consistent(th, r, order, om, both_ways) -> tuple[bool, str]:
+    """The harmonic fitted separately on two halves (the two directions, else the first and second half of
+    the angle travelled) agrees in amplitude (within 3 sigma + 30 %) and phase (within 60 deg): cogging is
+    locked to the angle, a disturbance locked to time is not."""
+    if both_ways:
+        halves = [om > 0, om < 0]
+        label = "directions"
+    else:
+        travel = np.concatenate([[0.0], np.cumsum(np.abs(np.diff(th)))])
+        halves = [travel < travel[-1] / 2, travel >= travel[-1] / 2]
+        label = "halves of the travel"
+    fits = []
+    for m in halves:
+        if m.sum() < 20:
+            return False, f"too few samples in one of the {label}"
+        X = np.column_stack([np.cos(order * th[m]), np.sin(order * th[m])])
+        coef, cov, _ = _lstsq(X, r[m])
+        fits.append((complex(coef[0], coef[1]), float(np.sqrt(max(cov[0, 0] + cov[1, 1], 0.0)))))
+    (z1, s1), (z2, s2) = fits
+    a1, a2 = abs(z1), abs(z2)
+    amp_ok = abs(a1 - a2) <= 3 * math.hypot(s1, s2) + 0.3 * max(a1, a2)
+    dphi = abs(math.degrees(np.angle(z1 / z2))) if a1 > 0 and a2 > 0 else 180.0
+    ok = amp_ok and dphi <= 60.0        # an angle integrated from speed drifts: a looser phase test
+    return ok, f"{label}: amplitudes {a1:.3g} and {a2:.3g} N*m, phases {dphi:.0f} deg apart"
+
+
+def order_spectrum(theta: np.ndarray, r: np.ndarray, max_order: int) -> np.ndarray:
+    """Amplitude of the least-squares harmonic fit of ``r`` at each order 1..max_order of ``theta``."""
+    amps = np.zeros(max_order + 1)
+    for k in range(1, max_order + 1):
+        c, s = np.cos(k * theta), np.sin(k * theta)
+        X = np.column_stack([c, s])
+        coef = np.linalg.lstsq(X, r, rcond=None)[0]
+        amps[k] = float(np.hypot(*coef))
+    return amps
+
+
+# ----------------------------------------------------------------------------------------- diagnosis
+
+def diagnose(sig: Signals, params, *, holdout: float = 0.3, max_harmonics: int = 3) -> TorqueBalanceResult:
+    N = float(sig.meta.get("gear_ratio") or params.gear.gear_ratio)
+    theta, w, alpha, how = motion(sig)
+    tau = sig.channels["torque"]
+    ok = np.isfinite(tau) & np.isfinite(theta) & np.isfinite(w) & np.isfinite(alpha)
+    notes = [f"no motor current: cogging and friction from the torque balance (sensor torque at the output, gear "
+             f"ratio {N:g}); angle {how}"]
+    n = int(ok.sum())
+    if n < 50:
+        return TorqueBalanceResult([], [], notes + [f"only {n} usable samples"], how, float("nan"), {})
+    th, om, al, y = theta[ok], w[ok], alpha[ok], tau[ok]
+    test = _blocks(n, holdout)
+    train = ~test
+    w_eps = max(1e-3, 0.02 * float(np.percentile(np.abs(om), 95)))
+    sgn = np.where(np.abs(om) > w_eps, np.sign(om), om / w_eps)
+    both_ways = min(np.mean(om > w_eps), np.mean(om < -w_eps)) > 0.05
+    revs = float(np.nansum(np.abs(np.diff(th)))) / (2 * math.pi)
+
+    # nominal model prediction (the parameters as given): one implementation of the cogging equation
+    e, m = params.effects, params.motor
+    nominal = -N * (e.coulomb_friction * sgn + m.viscous_damping * om + m.rotor_inertia * al
+                    + np.asarray(cogging_torque(th, e.cogging_order, np.asarray(e.cogging_cos, float),
+                                                np.asarray(e.cogging_sin, float)) if e.cogging_order else 0.0))
+
+    cols: dict[str, np.ndarray] = {"offset": np.ones(n)}
+    terms: list[tuple[str, list[str]]] = []
+    if both_ways:
+        cols["coulomb"] = -N * sgn
+        terms.append(("coulomb_friction", ["coulomb"]))
+    else:
+        notes.append("motion in one direction only: Coulomb friction and a sensor offset are one column; the drag "
+                     "is reported as the offset (experiment: turn it both ways)")
+    if np.std(om) > 0:
+        cols["viscous"] = -N * om
+        terms.append(("viscous_friction", ["viscous"]))
+    if np.std(al) * m.rotor_inertia * N > 1e-3 * max(np.std(y), 1e-12):
+        cols["inertia"] = -N * al
+        terms.append(("inertia_error", ["inertia"]))
+
+    def fit(keys, rows):
+        X = np.column_stack([cols[k][rows] for k in keys])
+        return _lstsq(X, y[rows])
+
+    def heldout(keys):
+        coef, _, _ = fit(keys, train)
+        pred = np.column_stack([cols[k][test] for k in keys]) @ coef
+        return float(np.sqrt(np.mean((y[test] - pred) ** 2)))
+
+    accepted_keys = ["offset"]
+    findings, rejected = [], []
+    base_rss = float(np.sum(fit(accepted_keys, np.ones(n, bool))[2] ** 2))
+    for effect, keys in terms:
+        trial = accepted_keys + keys
+        rss = float(np.sum(fit(trial, np.ones(n, bool))[2] ** 2))
+        dbic = _bic(base_rss, n, len(accepted_keys)) - _bic(rss, n, len(trial))
+        before, after = heldout(accepted_keys), heldout(trial)
+        ok_ = dbic > BIC_GATE and after < before
+        rec = (effect, keys, dbic, before, after)
+        if ok_:
+            accepted_keys, base_rss = trial, rss
+            findings.append(rec)
+        else:
+            rejected.append(rec)
+
+    # cogging: the order of the peak of the friction-only residual's angle-order spectrum
+    cog_terms = []
+    if revs >= 1.0:
+        _, _, r = fit(accepted_keys, np.ones(n, bool))
+        dth = float(np.median(np.abs(np.diff(th)))) or 1e-9
+        kmax = int(min(400, max(2, math.pi / dth / 2)))
+        amps = order_spectrum(th, r, kmax)
+        order = int(np.argmax(amps[1:]) + 1)
+        floor = float(np.median(amps[1:]))
+        stands_out = amps[order] >= PEAK_OVER_MEDIAN * floor
+        consistent, why = _consistent(th, r, order, om, both_ways)
+        if not (stands_out and consistent):
+            notes.append(f"cogging: the order-{order} peak ({amps[order]:.3g} N*m) "
+                         + (f"is only {amps[order] / max(floor, 1e-300):.1f} x the spectrum's median"
+                            if not stands_out else f"is not the same in both halves of the data ({why})")
+                         + ": not cogging (noise or a time-locked disturbance)")
+        for h in range(1, max_harmonics + 1 if stands_out and consistent else 1):
+            k = order * h
+            if k > kmax:
+                break
+            cols[f"cog_c{h}"] = -N * np.cos(k * th)
+            cols[f"cog_s{h}"] = -N * np.sin(k * th)
+            trial = accepted_keys + [f"cog_c{h}", f"cog_s{h}"]
+            rss = float(np.sum(fit(trial, np.ones(n, bool))[2] ** 2))
+            dbic = _bic(base_rss, n, len(accepted_keys)) - _bic(rss, n, len(trial))
+            before, after = heldout(accepted_keys), heldout(trial)
+            if dbic > BIC_GATE and after < before:
+                accepted_keys, base_rss = trial, rss
+                cog_terms.append((h, dbic, before, after))
+            else:
+                break
+        notes.append(f"angle-order spectrum of the friction-only residual: peak at order {order} per motor "
+                     f"revolution ({amps[order]:.3g} N*m at the output), {revs:.1f} revolutions covered")
+        if cog_terms:
+            findings.append(("cogging_torque", [c for h, *_ in cog_terms for c in (f"cog_c{h}", f"cog_s{h}")],
+                             sum(t[1] for t in cog_terms), cog_terms[0][2], cog_terms[-1][3]))
+    not_checkable = [] if revs >= 1.0 else [{"effect": "cogging_torque",
+                                              "reason": f"the angle covers {revs:.2f} revolution(s); needs >= 1"}]
+
+    coef, cov, r = fit(accepted_keys, np.ones(n, bool))
+    idx = {k: i for i, k in enumerate(accepted_keys)}
+    r2 = 1.0 - float(np.sum(r ** 2)) / max(float(np.sum((y - y.mean()) ** 2)), 1e-300)
+    identifiable = r2 >= 0.5
+    if not identifiable:
+        notes.append(f"the torque balance explains only {100 * r2:.0f} % of the torque variance: the motor was "
+                     "probably powered (its own torque is not logged without current): findings are suspected, "
+                     "not identifiable (experiment: log the motor current, or turn it unpowered)")
+
+    def sd(k):
+        v = cov[idx[k], idx[k]]
+        return float(math.sqrt(v)) if v >= 0 and math.isfinite(v) else float("nan")
+
+    out_f: list[Term] = []
+    out_r: list[Term] = []
+    for effect, keys, dbic, before, after in findings:
+        ho = {"metric": "torque_rms", "unit": "N*m", "before": before, "after": after}
+        if effect == "coulomb_friction":
+            par, unc, un = {"coulomb_friction": float(coef[idx["coulomb"]])}, {"coulomb_friction": sd("coulomb")}, {"coulomb_friction": "N*m"}
+        elif effect == "viscous_friction":
+            par, unc, un = {"viscous_damping": float(coef[idx["viscous"]])}, {"viscous_damping": sd("viscous")}, {"viscous_damping": "N*m*s/rad"}
+        elif effect == "inertia_error":
+            par, unc, un = {"rotor_inertia": float(coef[idx["inertia"]])}, {"rotor_inertia": sd("inertia")}, {"rotor_inertia": "kg*m^2"}
+        else:
+            par = {"cogging_order": order}
+            unc, un = {}, {"cogging_order": ""}
+            for h, *_ in cog_terms:
+                a, b = float(coef[idx[f"cog_c{h}"]]), float(coef[idx[f"cog_s{h}"]])
+                par[f"cos_{h}"], par[f"sin_{h}"] = a, b
+                unc[f"cos_{h}"], unc[f"sin_{h}"] = sd(f"cog_c{h}"), sd(f"cog_s{h}")
+                un[f"cos_{h}"] = un[f"sin_{h}"] = "N*m"
+            par["amplitude_1"] = float(math.hypot(par["cos_1"], par["sin_1"]))
+            unc["amplitude_1"] = float(math.hypot(unc["cos_1"], unc["sin_1"]))
+            un["amplitude_1"] = "N*m"
+        term = Term(effect, par, unc, un, ho, float(dbic), identifiable,
+                    "" if identifiable else "suspected, not identifiable (torque balance explains too little)")
+        (out_f if identifiable else out_r).append(term)
+    for effect, keys, dbic, before, after in rejected:
+        out_r.append(Term(effect, {}, {}, {}, {"metric": "torque_rms", "unit": "N*m", "before": before, "after": after},
+                          float(dbic), False, f"not supported (dBIC {dbic:.1f} <= {BIC_GATE:g} or held-out not better)"))
+    if "coulomb" in idx and coef[idx["coulomb"]] < 0:
+        notes.append("fitted Coulomb friction is negative: the torque sensor's sign is probably opposite to the "
+                     "canonical one (positive = the actuator drives in +); fix the sign in the input profile")
+    offset = float(coef[idx["offset"]])
+    notes.append(f"constant torque (sensor offset{'' if both_ways else ' + one-direction drag'}): {offset:.4g} N*m")
+    nom_rms = float(np.sqrt(np.mean((y[test] - nominal[test] - np.mean(y[train] - nominal[train])) ** 2)))
+    final = heldout(accepted_keys)
+    return TorqueBalanceResult(out_f, out_r, notes, how, r2,
+                               {"metric": "torque_rms", "unit": "N*m", "nominal": nom_rms, "after": final},
+                               not_checkable)
+
+
+def updated_params(params, result: TorqueBalanceResult):
+    """The parameters with the accepted terms written in (friction, inertia, cogging)."""
+    upd = {}
+    for f in result.findings:
+        p = f.parameters
+        if f.effect == "coulomb_friction":
+            upd["effects.coulomb_friction"] = max(0.0, p["coulomb_friction"])
+        elif f.effect == "viscous_friction":
+            upd["motor.viscous_damping"] = max(0.0, p["viscous_damping"])
+        elif f.effect == "inertia_error" and p["rotor_inertia"] > 0:
+            upd["motor.rotor_inertia"] = p["rotor_inertia"]
+        elif f.effect == "cogging_torque":
+            h = sorted(int(k.split("_")[1]) for k in p if k.startswith("cos_"))
+            upd["effects.cogging_order"] = int(p["cogging_order"])
+            upd["effects.cogging_cos"] = tuple(p[f"cos_{k}"] for k in h)
+            upd["effects.cogging_sin"] = tuple(p[f"sin_{k}"] for k in h)
+    return params.replace(**upd) if upd else params
