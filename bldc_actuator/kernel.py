@@ -47,6 +47,7 @@ _COEF_SCALARS = (
     "tau_c", "tau_asym", "tau_s", "omega_s", "cog_order", "load0", "load_g", "load_phi", "load_k", "load_k0",
     "has_alpha", "has_beta", "has_stribeck", "has_friction", "has_position_load", "k_sat",
     "fe_h", "fe_e", "sens_off_a", "sens_off_b", "sens_gain_a", "sens_gain_b", "has_sensor_error", "v_dt",
+    "v_lim_mode", "I_fw",
 )
 COEF_DTYPE = np.dtype(
     [(name, np.float64) for name in _COEF_SCALARS]
@@ -62,7 +63,15 @@ STATE_DTYPE = np.dtype([
     ("v_mode", np.bool_), ("v_cmd", np.complex128), ("tau_ext_out", np.float64),
     ("e_in", np.float64), ("e_joule", np.float64), ("e_visc", np.float64), ("e_fric", np.float64),
     ("e_load", np.float64), ("e_amb", np.float64), ("e_disc", np.float64), ("e_iron", np.float64),
+    ("i_fw", np.float64),
 ], align=True)
+
+#: ``drive.voltage_limit_mode`` -> the kernel's ``v_lim_mode`` code
+VOLTAGE_LIMIT_MODES = ("proportional", "d_priority", "q_priority", "field_weakening")
+#: the field-weakening regulator keeps |v| below this fraction of the circle, and runs at this fraction of
+#: the current-loop bandwidth
+FW_VOLTAGE_MARGIN = 0.95
+FW_BANDWIDTH_FRACTION = 0.1
 
 
 class Record:
@@ -175,6 +184,23 @@ def current_limit(c, s):
 
 
 @jit
+def limit_voltage(v, V_max, mode):
+    """The inverter's voltage circle |v| <= V_max applied to a d/q demand ``v`` (complex [V]) as the drive
+    does it (``mode``, see :data:`VOLTAGE_LIMIT_MODES`): 0/3 scale the whole vector onto the circle, 1 keeps
+    v_d (clamped to the circle) and gives v_q what remains, 2 keeps v_q and gives v_d the rest."""
+    if mode == 1.0:
+        vd = min(max(v.real, -V_max), V_max)
+        rq = math.sqrt(max(V_max * V_max - vd * vd, 0.0))
+        return complex(vd, min(max(v.imag, -rq), rq))
+    if mode == 2.0:
+        vq = min(max(v.imag, -V_max), V_max)
+        rd = math.sqrt(max(V_max * V_max - vq * vq, 0.0))
+        return complex(min(max(v.real, -rd), rd), vq)
+    mag = abs(v)
+    return v * (V_max / mag) if mag > V_max else v
+
+
+@jit
 def control_tick(c, s):
     """One execution of the discrete d/q PI current controller: the voltage ``s.v_next`` it computes from the
     sample is applied ``c.delay_ns`` later (at once without a computation delay) and held until the next one.
@@ -189,19 +215,29 @@ def control_tick(c, s):
         return
     s.tripped = s.tripped or s.T_w >= c.T_trip
     lim = current_limit(c, s)
-    s.i_ref = min(max(s.cmd_q, -lim), lim)
+    i_d_ref = 0.0
+    lim_q = lim
+    if c.v_lim_mode == 3.0 and c.I_fw > 0.0:      # field weakening: the d reference first, q gets the rest
+        i_d_ref = max(s.i_fw, -lim)
+        lim_q = math.sqrt(max(lim * lim - i_d_ref * i_d_ref, 0.0))
+    s.i_ref = min(max(s.cmd_q, -lim_q), lim_q)
     i = s.i
     if c.has_sensor_error != 0.0:   # the controller acts on what its sensors measure
         d_m, q_m = measured_current_dq(i.real, i.imag, c.pole_pairs * s.theta, c.sens_off_a, c.sens_off_b,
                                        c.sens_gain_a, c.sens_gain_b)
         i = d_m + 1j * q_m
-    err = 1j * s.i_ref - i                                     # i_d_ref = 0
+    err = i_d_ref + 1j * s.i_ref - i                           # i_d_ref = 0 unless field weakening
     v_ff = 0j
     if c.decouple != 0.0:
         v_ff = 1j * (c.pole_pairs * s.omega * c.L * i + c.K_ref * s.omega)
     v_pi = c.Kp * err + s.z + v_ff
-    mag = abs(v_pi)
-    v = v_pi * (c.V_max / mag) if mag > c.V_max else v_pi
+    v = limit_voltage(v_pi, c.V_max, c.v_lim_mode)
+    if c.v_lim_mode == 3.0 and c.I_fw > 0.0:
+        # field-weakening regulator: integrate the voltage demand's excess over the margin into a negative
+        # i_d reference (gain: the excess in amperes through the d-axis cross-coupling impedance)
+        z_fw = max(abs(c.pole_pairs * s.omega) * c.L, c.R_ref)
+        w_fw = FW_BANDWIDTH_FRACTION * c.Kp / c.L
+        s.i_fw = min(max(s.i_fw - w_fw * c.T_c * (abs(v_pi) - FW_VOLTAGE_MARGIN * c.V_max) / z_fw, -c.I_fw), 0.0)
     s.v_next = v                                               # applied after the computation delay
     if c.delay_ns == 0:
         s.v = v

@@ -139,6 +139,8 @@ class _Coeffs:
         self.Kp = w_c * self.L
         self.Ki = w_c * self.R_ref
         self.decouple = d("decoupling_enabled")
+        self.v_lim_mode = col(lambda p: kernel.VOLTAGE_LIMIT_MODES.index(p.drive.voltage_limit_mode))
+        self.I_fw = d("field_weakening_current_max")
         self.T_derate = d("derate_temperature")
         self.T_trip = d("trip_temperature")
         t = lambda name: col(lambda p: getattr(p.thermal, name))  # noqa: E731
@@ -235,6 +237,7 @@ class ActuatorState:
     z_q: float = 0.0            #: PI integrator, q [V]
     i_q_ref: float = 0.0        #: q-axis current reference after limits [A]
     tripped: bool = False       #: over-temperature trip (latched)
+    i_d_ref: float = 0.0        #: d-axis current reference of the field-weakening regulator [A] (<= 0)
 
     @property
     def t(self) -> float:
@@ -441,7 +444,7 @@ class Actuator(_Base):
         return ActuatorState(t_ns=int(g("t_ns")), i_d=i.real, i_q=i.imag, omega=float(g("omega")),
                              theta=float(g("theta")), T_winding=float(g("T_w")), T_housing=float(g("T_h")),
                              v_d=v.real, v_q=v.imag, z_d=z.real, z_q=z.imag, i_q_ref=float(g("i_ref")),
-                             tripped=bool(g("tripped")))
+                             tripped=bool(g("tripped")), i_d_ref=float(g("i_fw")))
 
     def set_state(self, st: ActuatorState) -> None:
         s = self._set
@@ -456,6 +459,7 @@ class Actuator(_Base):
         s("z", complex(st.z_d, st.z_q))
         s("i_ref", float(st.i_q_ref))
         s("tripped", bool(st.tripped))
+        s("i_fw", float(st.i_d_ref))
 
     def outputs(self) -> dict[str, float]:
         """Everything a driver or the node publishes, derived from the state."""

@@ -104,6 +104,15 @@ class DriveParams:
     current_loop_delay: float = _p(0.0, "s", "computation delay: the voltage computed from the sample at a "
                                    "controller tick is applied this long after it (0 .. one loop period)",
                                    0.0, 1e-3)
+    voltage_limit_mode: str = _p("proportional", "", "what the drive does when the PI asks for more voltage than "
+                                 "the inverter has: proportional (scale the whole d/q vector onto the circle; "
+                                 "i_d may go negative), d_priority (keep v_d, v_q gets the rest: ODrive, VESC), "
+                                 "q_priority (keep v_q, v_d gets the rest), field_weakening (proportional, plus a "
+                                 "negative i_d reference up to field_weakening_current_max)",
+                                 choices=("proportional", "d_priority", "q_priority", "field_weakening"))
+    field_weakening_current_max: float = _p(0.0, "A", "largest |i_d| the field-weakening regulator commands "
+                                            "(voltage_limit_mode field_weakening; the current limit bounds "
+                                            "sqrt(i_d^2 + i_q^2))", 0.0, 1000.0)
 
 
 @dataclass(frozen=True)

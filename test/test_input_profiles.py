@@ -36,8 +36,8 @@ def _wide(tmp_path, joints=3, n=400):
         cols[f"Cur{j}"] = j * np.cos(t)
         cols[f"Torque{j}"] = 0.8 * j * np.cos(t)
         cols[f"Temp{j}"] = 30.0 + j + 0 * t
-    return _write(tmp_path / "robot" / "2026-03-04_joints.csv" if (tmp_path / "robot").mkdir() or True else None,
-                  list(cols), np.column_stack(list(cols.values())))
+    (tmp_path / "robot").mkdir()
+    return _write(tmp_path / "robot" / "2026-03-04_joints.csv", list(cols), np.column_stack(list(cols.values())))
 
 
 def test_every_shipped_profile_is_valid_and_named_after_its_file():
