@@ -38,6 +38,7 @@ that declares, for one log format:
 from __future__ import annotations
 
 import datetime as dt
+import functools
 import math
 import re
 from dataclasses import dataclass, field
@@ -199,10 +200,17 @@ def profile_dir() -> Path:
 
 
 def available() -> list[InputProfile]:
-    """Every shipped profile, highest priority first."""
+    """Every shipped profile, highest priority first (each file parsed once per process while unchanged)."""
     d = profile_dir()
-    profs = [InputProfile.from_yaml(p) for p in sorted(d.glob("*.yaml"))] if d.is_dir() else []
+    files = sorted(d.glob("*.yaml")) if d.is_dir() else []
+    profs = [_parsed(str(p), p.stat().st_mtime_ns) for p in files]
     return sorted(profs, key=lambda p: -int(p.priority))
+
+
+@functools.lru_cache(maxsize=256)
+def _parsed(path: str, mtime_ns: int) -> InputProfile:
+    """A profile file parsed (memoised on path and modification time; profiles are read-only once parsed)."""
+    return InputProfile.from_yaml(path)
 
 
 def get(name_or_file: str | Path | InputProfile) -> InputProfile:
