@@ -51,10 +51,13 @@ def register(subparsers) -> None:
     p.add_argument("--max-uncertainty", type=float, default=0.5, metavar="FRACTION",
                    help="every accepted value must have a relative uncertainty below this, else 'suspected, not "
                         "identifiable' (default 0.5)")
-    p.add_argument("--simulation-gate", action="store_true",
-                   help="accept only findings that make the simulated actuator reproduce held-out data better "
-                        "(leave-one-out replay beyond the window-to-window noise floor); without it the simulated "
-                        "verdict is reported per finding")
+    p.add_argument("--simulation-gate", dest="simulation_gate", action="store_true", default=True,
+                   help="(default) accept only findings that make the simulated actuator reproduce held-out data "
+                        "better: leave-one-out replay from recorded states beyond the window-to-window noise floor, "
+                        "and for thermal-network findings the full-length thermal simulation; no other simulated "
+                        "channel may get worse by more than --tolerance")
+    p.add_argument("--no-simulation-gate", dest="simulation_gate", action="store_false",
+                   help="accept in equation-error space only (the simulated verdict is still reported per finding)")
     p.add_argument("--cutoff", type=float, metavar="HZ", help="parallel low-pass cut-off (default min(fs/10, 100 Hz))")
     p.add_argument("--window", type=float, default=0.1, metavar="S", help="replay window length (default 0.1 s)")
     p.add_argument("--no-plots", action="store_true", help="Markdown report without PNGs")
@@ -197,7 +200,7 @@ def _print_summary(report, args) -> None:
             line += f"; held-out {ho['metric']}: {_fmt(ho['before'])} -> {_fmt(ho['after'])} {ho.get('unit', '')}"
         sim = f.get("simulation")
         if sim and sim.get("channel"):
-            unit = {"velocity": "rad/s", "current": "A", "voltage": "V"}[sim["channel"]]
+            unit = {"velocity": "rad/s", "current": "A", "voltage": "V", "temperature": "K"}[sim["channel"]]
             line += (f"; simulated held-out {sim['channel']} error without/with it {_fmt(sim['without'])} -> "
                      f"{_fmt(sim['with'])} {unit}: {sim['verdict']}")
         print(line)

@@ -238,6 +238,7 @@ class Context:
     sig: dict[str, np.ndarray] = field(default_factory=dict)     #: derived signals (raw rate)
     notes: list[str] = field(default_factory=list)
     holdout_raw: np.ndarray | None = None      #: raw samples in the held-out part
+    part_starts: tuple = ()                     #: first raw sample of each concatenated recording
     omega_eps: float = 0.0                     #: velocity noise scale [rad/s] (friction smoothing)
     steady: bool = False
     blocks: dict[str, "Block"] = field(default_factory=dict)
@@ -356,7 +357,7 @@ def prepare(parts: list[tuple[Any, bool]], params: ActuatorParams, *, fc: float 
             holdout: float = 0.3) -> Context:
     """Concatenate recordings (``(signals, is_holdout_recording)``), fill masks, derive signals, choose
     the filter. With a single recording, the held-out part is chosen by :func:`holdout_mask`."""
-    times, chans, segs, hold = [], {}, [], []
+    times, chans, segs, hold, starts = [], {}, [], [], []
     offset, n0 = 0.0, 0
     names: set = set()
     notes: list[str] = []
@@ -371,6 +372,7 @@ def prepare(parts: list[tuple[Any, bool]], params: ActuatorParams, *, fc: float 
             continue
         tt = t - t[0] + offset
         times.append(tt)
+        starts.append(n0)
         for name in names:
             a = np.asarray(sig.channels.get(name, np.full(n, np.nan)), dtype=float)
             chans.setdefault(name, []).append(a)
@@ -409,7 +411,7 @@ def prepare(parts: list[tuple[Any, bool]], params: ActuatorParams, *, fc: float 
     valid = {k: np.isfinite(v) for k, v in raw_in.items()}
     raw = {k: _fill(v, valid[k], segments) for k, v in raw_in.items()}
     ctx = Context(params=params, t=t, segments=segments, fs=fs, dec=dec, have=set(raw), raw=raw, valid=valid,
-                  notes=notes, steady=steady)
+                  notes=notes, steady=steady, part_starts=tuple(starts))
     if len(parts) > 1 and any(h for _, h in parts):
         ctx.holdout_raw = np.concatenate(hold)
     else:
@@ -552,7 +554,8 @@ def _derive(ctx: Context) -> None:
 def thermal_response(ctx: Context, p: ActuatorParams, extra_heat: np.ndarray | None = None,
                      T0: tuple[float, float] | None = None, every: int | None = None):
     """Winding and housing temperature of the two-node network driven by the measured Joule power
-    ``R(T_w)(i_d² + i_q²)`` (+ ``extra_heat`` [W]), per segment (state carried across segments),
+    ``R(T_w)(i_d² + i_q²)`` (+ ``extra_heat`` [W]), per segment (state carried across segments; a second
+    recording, e.g. a held-out file, starts again from its own first measured temperatures),
     evaluated every ``every`` raw samples and held in between. Returns raw-rate (T_w, T_h)."""
     from .. import model
 
@@ -568,8 +571,14 @@ def thermal_response(ctx: Context, p: ActuatorParams, extra_heat: np.ndarray | N
     y2 = (T0[1] if T0 else th.initial_housing_temperature) - th.ambient_temperature
     cache: dict[float, tuple] = {}
     prev_end = None
+    restart = set(ctx.part_starts[1:])
     for a, b in ctx.segments:
-        if prev_end is not None:   # gap: let the network relax without power over the gap
+        if a in restart:           # another recording (a held-out file): its own measured temperatures
+            y1 = _first_temperature(ctx, ("winding_temperature", "housing_temperature"), a, y1 + th.ambient_temperature) \
+                - th.ambient_temperature
+            y2 = _first_temperature(ctx, ("housing_temperature", "winding_temperature"), a, y2 + th.ambient_temperature) \
+                - th.ambient_temperature
+        elif prev_end is not None:   # gap: let the network relax without power over the gap
             gap = ctx.t[a] - ctx.t[prev_end - 1]
             if gap > 0:
                 p11, p12, p21, p22, *_ = model._thermal_matrices(
@@ -599,6 +608,13 @@ def thermal_response(ctx: Context, p: ActuatorParams, extra_heat: np.ndarray | N
             y1, y2 = p11 * y1 + p12 * y2 + G1 * P, p21 * y1 + p22 * y2 + G2 * P
         prev_end = b
     return T_w, T_h
+
+
+def _first_temperature(ctx: Context, names, k: int, default: float) -> float:
+    for n in names:
+        if n in ctx.have and ctx.valid[n][k:].any():
+            return float(ctx.raw[n][k + int(np.argmax(ctx.valid[n][k:]))])
+    return default
 
 
 def stuck_mask(ctx: Context, window: float | None = None) -> np.ndarray:

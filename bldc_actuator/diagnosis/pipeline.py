@@ -50,7 +50,7 @@ class DiagnoseOptions:
     max_windows: int = 120                    #: replay windows per set (evenly thinned)
     replay: bool = True                       #: run the short-window simulation comparison
     gate: GateConfig = field(default_factory=GateConfig)
-    simulation_gate: bool = False             #: accept only findings the held-out simulation confirms
+    simulation_gate: bool = True              #: accept only findings the held-out simulation confirms
     tolerance: float = 0.05                   #: a parameter-change finding must move its parameter by more
     max_relative_uncertainty: float = 0.5     #: every accepted value must be identified this well (sd/|value|)
     progress: bool | Callable[[str], None] = False   #: True: one line per stage on stderr
@@ -224,7 +224,8 @@ def _diagnose(signals, params: ActuatorParams, options: DiagnoseOptions) -> Diag
         for v in verdicts:
             say(f"5/6 model: {v.message}")
     # the simulator as judge: each finding's held-out simulated error with and without it (leave one out)
-    sim_verdicts = judge.simulate_findings(ctx, sel, pars, lib, starts_ho, options.window_s) \
+    sim_verdicts = judge.simulate_findings(ctx, sel, pars, lib, starts_ho, options.window_s,
+                                           tolerance=options.tolerance) \
         if options.replay and starts_ho else {}
     if options.simulation_gate:
         refused = {e for e, v in sim_verdicts.items() if v["verdict"] not in ("confirmed", "not simulated")}
@@ -241,6 +242,20 @@ def _diagnose(signals, params: ActuatorParams, options: DiagnoseOptions) -> Diag
             pars = refit.effect_parameters(ctx, sel, ff, lib)
     new_params, param_notes, not_sim = refit.updated_params(ctx, sel, pars, lib)
     base = base_model.check(ctx)   # several core values far off: say so before any effect
+    # thermal-network findings judged by the full-length thermal simulation of the final model (leave one out)
+    thermal_verdicts = judge.judge_thermal(ctx, new_params, thermal) if thermal["findings"] else {}
+    sim_verdicts.update(thermal_verdicts)
+    if options.simulation_gate:
+        refused = {e for e, v in thermal_verdicts.items() if v["verdict"] != "confirmed"}
+        for e in sorted(refused):
+            v = thermal_verdicts[e]
+            verdicts.append(significance.Verdict(e, "not_confirmed_in_simulation",
+                                                 f"{e}: {v['verdict']} (held-out simulated temperature error "
+                                                 f"{v['without']:.3g} -> {v['with']:.3g} K, needs a gain above "
+                                                 f"{v['noise_floor']:.2g} K)"))
+        thermal["findings"] = [f for f in thermal["findings"] if f["effect"] not in refused]
+        if "iron_loss" in refused:
+            thermal["extra_heat"] = None
     if thermal["findings"]:
         new_params, tnotes, tns = refit.apply_thermal(new_params, thermal)
         param_notes += tnotes
@@ -253,6 +268,9 @@ def _diagnose(signals, params: ActuatorParams, options: DiagnoseOptions) -> Diag
     t0 = time.perf_counter()
     findings = _findings(ctx, sel, ff, pars, lib, located, not_sim)
     for f in findings:
+        if f["effect"] in sim_verdicts:
+            f["simulation"] = sim_verdicts[f["effect"]]
+    for f in thermal["findings"]:
         if f["effect"] in sim_verdicts:
             f["simulation"] = sim_verdicts[f["effect"]]
     findings += thermal["findings"]

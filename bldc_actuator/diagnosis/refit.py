@@ -27,6 +27,7 @@ from ..params import SPECS, ActuatorParams, from_flat
 from .candidates import Candidate
 from .equation_error import Context, Fit, thermal_response
 from .selection import SelectionResult, fit_model
+from .significance import THERMAL_FIT_BOUND_LOG
 
 
 # -- final fit --------------------------------------------------------------------------------------
@@ -149,7 +150,37 @@ def effect_parameters(ctx: Context, sel: SelectionResult, ff: FinalFit, lib: dic
                 "value": info, "sd": ff.nonlinear[a.effect].get(name + "_sd", float("nan")),
                 "unit": "rad/s" if name == "omega_s" else "", "field": fld}
         out.setdefault(a.effect, {}).update(pars)
+    _rescale_by_torque_constant(out, lib)
     return out
+
+
+#: units of torque-side parameters: fitted in current units (torque / K) they carry the K they were divided by
+_TORQUE_UNITS = ("N*m", "N*m*s/rad", "N*m*s^2/rad^2", "N*m/rad", "kg*m^2")
+
+
+def _rescale_by_torque_constant(pars: dict[str, dict], lib: dict[str, Candidate]) -> None:
+    """The mechanical equation is fitted in current units (every torque divided by the NOMINAL K). With a
+    torque-constant finding κ = K_true / K the model's torque is κ K i, so every torque-side parameter fitted
+    alongside (friction, damping, cogging, loads, inertia change) is κ times its current-unit coefficient;
+    without this the updated parameters simulate friction 1/κ too small (issue #7, symptom 2)."""
+    kt = pars.get("torque_constant_error", {}).get("ratio_to_nominal", {})
+    kappa = kt.get("value")
+    if not isinstance(kappa, (int, float)) or not math.isfinite(kappa) or kappa <= 0:
+        return
+    for effect, ps in pars.items():
+        if effect == "torque_constant_error" or "mechanical" not in lib[effect].equations:
+            continue
+        for name, info in ps.items():
+            if info.get("unit") not in _TORQUE_UNITS or not isinstance(info.get("value"), (int, float)):
+                continue
+            if isinstance(info.get("delta"), (int, float)):     # nominal + fitted change: the change scales
+                info["value"] = info["value"] + (kappa - 1.0) * info["delta"]
+                info["delta"] = info["delta"] * kappa
+            else:                                               # a fitted magnitude (no nominal part)
+                info["value"] = info["value"] * kappa
+            if isinstance(info.get("sd"), (int, float)):
+                info["sd"] = info["sd"] * kappa
+            info["scaled_by_torque_constant"] = kappa
 
 
 def updated_params(ctx: Context, sel: SelectionResult, pars: dict[str, dict], lib: dict[str, Candidate]):
@@ -274,14 +305,23 @@ def replay(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], le
     w_meas = S["omega_s"]
     cmd, _ = _commands(ctx)
     load = ctx.raw["torque"] if use_sensor else (ctx.raw["load_torque"] if "load_torque" in ctx.have else None)
-    K = np.array([p.motor.torque_constant_q for p in plist])
-    R = np.array([p.motor.phase_resistance for p in plist])
+    # the resistance and flux at each window's temperatures, as the kernel evaluates them (effects.py): the
+    # initial voltage and PI integrator must hold the drop the model's own plant has there, else every window
+    # starts with a current sag that is the initialisation's, not the model's (issue #7, R(T) judged worse)
+    T_w0, T_h0 = S["T_w"][st], S["T_h"][st]
+    K = np.array([p.motor.torque_constant_q * effects.flux_factor(th, p.motor.reference_temperature,
+                                                                    p.motor.magnet_temperature_coefficient,
+                                                                    p.motor.magnet_temperature_enabled)
+                  for p, th in zip(plist, T_h0)])
+    R = np.array([effects.resistance_at(p.motor.phase_resistance, tw, p.motor.reference_temperature,
+                                        p.motor.copper_temperature_coefficient, p.motor.resistance_temperature_enabled)
+                  for p, tw in zip(plist, T_w0)])
     Lq = np.array([p.motor.q_inductance for p in plist])
     pp = np.array([p.motor.pole_pairs for p in plist])
     i_q0, w0 = i_meas[st], w_meas[st]
     i_d0 = ctx.dec.lowpass(S["i_d"])[st]
-    b.set_state(i_d=i_d0, i_q=i_q0, omega=w0, theta=S["theta"][st], T_winding=S["T_w"][st],
-                T_housing=S["T_h"][st], v_d=R * i_d0 - pp * w0 * Lq * i_q0,
+    b.set_state(i_d=i_d0, i_q=i_q0, omega=w0, theta=S["theta"][st], T_winding=T_w0,
+                T_housing=T_h0, v_d=R * i_d0 - pp * w0 * Lq * i_q0,
                 v_q=R * i_q0 + K * w0 + pp * w0 * Lq * i_d0, z_d=R * i_d0, z_q=R * i_q0, i_q_ref=cmd[st])
     dt = 1.0 / ctx.fs
     sim_i = np.zeros((L, len(plist)))
@@ -423,7 +463,8 @@ def thermal_select(ctx: Context, names: list[str], lib: dict[str, Candidate], ga
                     r, _, _ = _thermal_resid(ctx, params_with(x), heat(state["k"]) if state["k"].any() else None, every)
                     r = r[~ho]
                     return np.nan_to_num(r)
-                sol = least_squares(f, state["x"], bounds=(-math.log(10), math.log(10)), x_scale=0.3, max_nfev=40)
+                sol = least_squares(f, state["x"], bounds=(-THERMAL_FIT_BOUND_LOG, THERMAL_FIT_BOUND_LOG), x_scale=0.3,
+                                    max_nfev=40)
                 r1, _, _ = _thermal_resid(ctx, params_with(sol.x), heat(state["k"]) if state["k"].any() else None, every)
                 evals.append((name, sol, r1, 4))
             else:

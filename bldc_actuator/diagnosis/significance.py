@@ -33,6 +33,10 @@ _THERMAL = ("winding_to_housing_resistance", "housing_to_ambient_resistance", "w
             "housing_heat_capacity")
 
 
+#: |log(value / nominal)| bound of the thermal network's output-error fit (refit.thermal_select)
+THERMAL_FIT_BOUND_LOG = math.log(10.0)
+
+
 @dataclass
 class Verdict:
     effect: str
@@ -66,6 +70,17 @@ def judge(effects: dict[str, dict[str, dict[str, Any]]], nominal: ActuatorParams
                                f"{effect}: consistent with nominal (the fit moves it by {100 * change:.2g} %, below "
                                f"the {100 * tolerance:g} % tolerance)"))
             continue
+        if effect == "thermal_parameters":      # the output-error fit is bounded to [1/10, 10] x nominal
+            th = nominal.thermal
+            pinned = [f for f in _THERMAL if f in values and getattr(th, f)
+                      and abs(math.log(values[f] / getattr(th, f))) > THERMAL_FIT_BOUND_LOG * 0.98]
+            if pinned:
+                out.append(Verdict(effect, "not_identifiable",
+                                   f"{effect}: suspected, not identifiable — {', '.join(pinned)} ran to the fit's bound "
+                                   f"(10x or 1/10 of nominal): the data do not pin the thermal network down; "
+                                   f"experiment that would separate it: "
+                                   f"{experiments.get(effect) or 'a longer run with a larger temperature span (heating and cooling)'}"))
+                continue
         rels = []
         for name, info in pars.items():
             v, sd = info.get("value"), info.get("sd")
