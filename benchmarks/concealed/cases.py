@@ -146,6 +146,9 @@ class Case:
     #: effect → effects it cannot be told from in this kind of data; naming one of those AND reporting the
     #: alias (report["aliases"]) is scored "alias reported", not a silent miss
     alias_ok: dict = field(default_factory=dict)
+    #: how the robot logs (see :func:`logged`): ``{"rate": Hz, "filter": "sample" | "mean"}``; {} = every
+    #: sample of the 1 kHz joint controller
+    log: dict = field(default_factory=dict)
 
     @property
     def is_null(self) -> bool:
@@ -303,6 +306,38 @@ CASES: tuple[Case, ...] = (
     Case("null_warm", (), "nothing hidden: 80 s warm-up under a 12 N·m payload, R(T) modelled", {},
          nominal={"load.load_torque": 12.0}, train=Excitation("gait", 80.0, 25, {"amplitude": 0.35}),
          heldout=Excitation("multisine", 40.0, 26), seed=23),
+    # --- recordings unlike the project's own (issue #7): coarse logging, long thermal runs, other drive tunings,
+    #     sensor filters; nulls in every style
+    Case("null_thermal_100hz", (), "nothing hidden: a 10-minute thermal duty cycle (gait under a 12 N·m brake "
+         "load), logged at 100 Hz by a logger that averages", {},
+         nominal={"load.load_torque": 12.0}, train=Excitation("gait", 600.0, 41, {"amplitude": 0.35}),
+         heldout=Excitation("gait", 240.0, 42, {"amplitude": 0.3, "freq": 0.9}), seed=41,
+         log={"rate": 100.0, "filter": "mean"}),
+    Case("r_thermal_100hz", ("resistance_temperature",),
+         "R(T) switched off in the model; a 10-minute duty cycle under a 12 N·m brake load, logged at 100 Hz "
+         "(averaged)",
+         {"resistance_temperature": {"copper_temperature_coefficient": 0.00393}},
+         plant={"alpha_cu": 0.00393},
+         nominal={"motor.resistance_temperature_enabled": False, "load.load_torque": 12.0},
+         train=Excitation("gait", 600.0, 43, {"amplitude": 0.35}),
+         heldout=Excitation("gait", 240.0, 44, {"amplitude": 0.3, "freq": 0.9}), channel="voltage_q", seed=43,
+         log={"rate": 100.0, "filter": "mean"}),
+    Case("null_short_thermal", (), "nothing hidden: 60 s at 1 kHz with a few kelvin of temperature span "
+         "(the thermal network cannot be identified from it)", {},
+         nominal={"load.load_torque": 6.0}, train=Excitation("gait", 60.0, 45, {"amplitude": 0.35}),
+         heldout=Excitation("multisine", 30.0, 46), seed=45),
+    Case("null_slow_drive", (), "nothing hidden: a drive tuned to a 250 Hz current loop with a 100 Hz speed "
+         "estimator, logged at 250 Hz (sampled)", {},
+         nominal={"drive.current_loop_bandwidth": 250.0}, drive={"pll_bandwidth": 100.0},
+         train=Excitation("mixed", 40.0, 47), heldout=Excitation("multisine", 20.0, 48), seed=47,
+         log={"rate": 250.0, "filter": "sample"}),
+    Case("coulomb_250hz", ("coulomb_friction",), "Coulomb friction left out; logged at 250 Hz by an averaging "
+         "logger", {"coulomb_friction": {"coulomb_friction": F_C}}, plant={"coulomb": F_C}, seed=49,
+         log={"rate": 250.0, "filter": "mean"}),
+    Case("viscous_slow_drive", ("viscous_friction",), "viscous friction 21x too small; a drive tuned to a 250 Hz "
+         "current loop with a 100 Hz speed estimator",
+         {"viscous_friction": {"viscous_damping": 2.1e-4}}, plant={"b": 2.1e-4},
+         nominal={"drive.current_loop_bandwidth": 250.0}, drive={"pll_bandwidth": 100.0}, seed=51),
 )
 
 
@@ -321,6 +356,36 @@ def get_case(name: str) -> Case:
         if c.name == name:
             return c
     raise KeyError(f"no case {name!r} (have: {', '.join(c.name for c in CASES)})")
+
+
+# -------------------------------------------------------------------------------------------- logging
+
+#: channels a logger averages over its period with ``filter: mean`` (an encoder angle and temperatures are read
+#: once per period; the ``true_*`` internals are sampled for the SNR table)
+_AVERAGED = ("current_command", "current", "velocity", "bus_voltage", "voltage_q")
+
+
+def logged(rec: dict[str, np.ndarray], log: dict) -> dict[str, np.ndarray]:
+    """The recording as the robot's logger writes it: every ``1000 / rate``-th controller sample
+    (``filter: sample``), or the mean over each logging period stamped at its centre (``filter: mean``: a
+    logger that averages, i.e. a moving-average sensor filter with a half-period lag of its own)."""
+    if not log:
+        return rec
+    q = int(round(ex.RATE / float(log["rate"])))
+    if q <= 1:
+        return rec
+    n = (len(rec["time"]) // q) * q
+    mean = log.get("filter", "sample") == "mean"
+    out = {}
+    for k, v in rec.items():
+        v = np.asarray(v)
+        if mean and k in _AVERAGED:
+            out[k] = v[:n].reshape(-1, q).mean(axis=1)
+        elif mean and k == "time":
+            out[k] = v[:n].reshape(-1, q).mean(axis=1)
+        else:
+            out[k] = v[:n:q] if not mean else v[:n].reshape(-1, q)[:, q // 2]
+    return out
 
 
 # -------------------------------------------------------------------------------------------- writing
@@ -377,7 +442,7 @@ def generate(cases, outdir: Path, *, progress: Callable[[str], None] | None = No
             progress(f"simulated {done}/{total} recordings")
 
     results = simulate([j[2] for j in jobs], [j[3] for j in jobs], workers=workers, progress=tick)
-    by = {(j[0].name, j[1]): r for j, r in zip(jobs, results)}
+    by = {(j[0].name, j[1]): logged(r, j[0].log) for j, r in zip(jobs, results)}
     truths = {}
     for case in cases:
         d = outdir / case.name
@@ -413,6 +478,8 @@ def generate(cases, outdir: Path, *, progress: Callable[[str], None] | None = No
             "oracle": ora,
             "train": {"excitation": case.train.kind, "duration_s": case.train.duration, "seed": tr_spec.seed},
             "heldout": {"excitation": case.heldout.kind, "duration_s": case.heldout.duration, "seed": ho_spec.seed},
+            "log": case.log or {"rate": ex.RATE, "filter": "sample"},
+            "drive": {"current_loop_bandwidth_hz": tr_spec.drive.bandwidth, "pll_bandwidth_hz": tr_spec.drive.pll_bandwidth},
             "sensors": {"current_noise_per_phase_A": SENSORS.current_noise, "encoder_bits": SENSORS.encoder_bits,
                         "winding_temperature_quantum_degC": SENSORS.winding_quantum},
             "ranges": _ranges(full),

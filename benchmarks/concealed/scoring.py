@@ -166,6 +166,10 @@ class CaseScore:
     error: str | None = None
     false_positive_detail: list[dict] = field(default_factory=list)
     aliased: list[str] = field(default_factory=list)   #: missed, but reported as aliased with a named effect
+    #: the simulated actuator with the updated parameters against held-out data: "better" | "worse" |
+    #: "unchanged" (nothing accepted, or no simulated channel moved by 1 %) | None (no simulation in the report)
+    simulated: str | None = None
+    simulated_detail: str = ""
     alias_accepted: list[str] = field(default_factory=list)  #: of those, the case says the data cannot separate them
 
     @property
@@ -207,6 +211,7 @@ def score_case(truth: dict, report: dict | None, nominal_flat: dict, *, wall_tim
     fps = [e for e in names if e not in hidden]
     cs = CaseScore(truth["case"], hidden, names, missed, fps, snr=conc.get("snr"), channel=conc.get("channel"),
                    wall_time_s=wall_time, error=error, verdict_text=report.get("verdict"))
+    cs.simulated, cs.simulated_detail = simulated_verdict(report)
     timing = report.get("timing")
     if isinstance(timing, dict):
         cs.diagnose_time_s = _num(timing.get("total"))
@@ -243,6 +248,39 @@ def score_case(truth: dict, report: dict | None, nominal_flat: dict, *, wall_tim
     return cs
 
 
+#: a simulated channel moves when its held-out error changes by more than this fraction
+SIM_MOVE = 0.01
+
+
+def simulated_verdict(report: dict) -> tuple[str | None, str]:
+    """Compare the report's held-out simulations before -> after (``compare.replay.holdout`` short-window
+    replay: velocity, current, position; ``compare.thermal``: full-length temperature): "better" when one
+    channel improves by more than 1 % and none gets worse by more than 1 %."""
+    cmp_ = report.get("compare") or {}
+    pairs = []
+    ho = ((cmp_.get("replay") or {}).get("holdout") or {})
+    if ho.get("before") and ho.get("after"):
+        for ch in ("velocity_rms", "current_rms", "position_rms"):
+            b, a = _num(ho["before"].get(ch)), _num(ho["after"].get(ch))
+            if b and a is not None:
+                pairs.append((ch.replace("_rms", ""), b, a))
+    th = cmp_.get("thermal") or {}
+    if th.get("before") and th.get("after"):
+        for ch in ("winding_temperature", "housing_temperature"):
+            b = _num((th["before"].get(ch) or {}).get("holdout_rms"))
+            a = _num((th["after"].get(ch) or {}).get("holdout_rms"))
+            if b and a is not None:
+                pairs.append((ch, b, a))
+    if not pairs:
+        return None, ""
+    detail = "; ".join(f"{ch} {b:.3g}→{a:.3g}" for ch, b, a in pairs)
+    worse = [ch for ch, b, a in pairs if a > b * (1 + SIM_MOVE)]
+    better = [ch for ch, b, a in pairs if a < b * (1 - SIM_MOVE)]
+    if worse:
+        return "worse", detail
+    return ("better" if better else "unchanged"), detail
+
+
 def summarise(scores: list[CaseScore]) -> dict:
     effect_cases = [s for s in scores if not s.is_null]
     nulls = [s for s in scores if s.is_null]
@@ -270,6 +308,9 @@ def summarise(scores: list[CaseScore]) -> dict:
         "median_parameter_error": sorted(errs)[len(errs) // 2] if errs else None,
         "mean_held_out_improvement": sum(improvements) / len(improvements) if improvements else None,
         "missed_but_reported_aliased": sum(len(s.aliased) for s in effect_cases),
+        "simulated_better": sum(s.simulated == "better" for s in effect_cases),
+        "simulated_worse": sum(s.simulated == "worse" for s in scores),
+        "simulated_judged": sum(s.simulated is not None for s in effect_cases),
         "errors": sum(s.error is not None for s in scores),
         "mean_wall_time_s": sum(times) / len(times) if times else None,
         "max_wall_time_s": max(times) if times else None,
@@ -316,6 +357,7 @@ def rows(scores: list[CaseScore], truths: dict[str, dict]) -> list[list[str]]:
             "; ".join(params) or "–",
             "; ".join(errs) or "–",
             "; ".join(held) or "–",
+            (s.simulated or "–") + (f" ({s.simulated_detail})" if s.simulated_detail and s.simulated != "unchanged" else ""),
             _fmt(s.wall_time_s, ".1f") + (f" ({s.diagnose_time_s:.1f})" if s.diagnose_time_s is not None else ""),
         ])
     return out
@@ -323,7 +365,7 @@ def rows(scores: list[CaseScore], truths: dict[str, dict]) -> list[list[str]]:
 
 HEADER = ["case", "hidden effect(s)", "effect/noise RMS (channel) = SNR", "named by diagnose", "verdict",
           "main parameter true→est", "rel. error", "held-out before→after",
-          "wall (internal) time [s]"]
+          "simulated held-out (updated vs nominal parameters)", "wall (internal) time [s]"]
 
 
 def text_table(scores, truths) -> str:
@@ -361,6 +403,9 @@ def summary_text(summary: dict) -> str:
             f"main-parameter error: mean {pct(summary['mean_parameter_error'])}, median "
             f"{pct(summary['median_parameter_error'])} over {summary['parameters_scored']} scored parameters; "
             f"mean held-out improvement of the named hidden effects: {pct(summary['mean_held_out_improvement'])}\n"
+            f"simulated actuator with the updated parameters vs the nominal ones on held-out data: better in "
+            f"{summary.get('simulated_better', 0)} of {summary.get('simulated_judged', 0)} effect cases; worse in "
+            f"{summary.get('simulated_worse', 0)} case(s)\n"
             f"wall time per case (subprocess, incl. start-up): mean {_fmt(summary['mean_wall_time_s'], '.1f')} s, max "
             f"{_fmt(summary['max_wall_time_s'], '.1f')} s; diagnose's own total: mean "
             f"{_fmt(summary.get('mean_diagnose_time_s'), '.1f')} s; errors: {summary['errors']}")

@@ -33,7 +33,7 @@ from ..params import ActuatorParams
 from . import candidates as cands
 from . import equation_error as ee
 from . import locate as loc_mod
-from . import base_model, judge, refit, significance
+from . import base_model, judge, output_error, refit, significance
 from .report import DiagnosisReport
 from .selection import GateConfig, fit_model, forward_select
 
@@ -241,6 +241,19 @@ def _diagnose(signals, params: ActuatorParams, options: DiagnoseOptions) -> Diag
             sel.final_fit = ff.fit
             pars = refit.effect_parameters(ctx, sel, ff, lib)
     new_params, param_notes, not_sim = refit.updated_params(ctx, sel, pars, lib)
+    # output-error refit: the accepted effects' simulator parameters and the core jointly, by multiple shooting
+    oe = None
+    if options.replay and sel.accepted and starts_ho:
+        starts_tr = refit.windows(ctx, options.window_s, options.max_windows, "train")
+        oe = output_error.refit(ctx, ctx.params, new_params, starts_tr, starts_ho, options.window_s)
+        if oe.get("kept"):
+            new_params = oe["params"]
+            param_notes.append("output-error refit kept (multiple shooting): " + ", ".join(
+                f"{k} {v['equation_error']:.4g} -> {v['output_error']:.4g}" for k, v in oe["fields"].items()))
+        if oe.get("available"):
+            say(f"5/6 model: output-error refit {'kept' if oe['kept'] else 'not kept'} ({oe['evaluations']} "
+                f"evaluations; held-out speed RMS {oe['holdout']['equation_error']['velocity_rms']:.3g} -> "
+                f"{oe['holdout']['output_error']['velocity_rms']:.3g} rad/s)")
     base = base_model.check(ctx)   # several core values far off: say so before any effect
     # thermal-network findings judged by the full-length thermal simulation of the final model (leave one out)
     thermal_verdicts = judge.judge_thermal(ctx, new_params, thermal) if thermal["findings"] else {}
@@ -254,8 +267,8 @@ def _diagnose(signals, params: ActuatorParams, options: DiagnoseOptions) -> Diag
                                                  f"{v['without']:.3g} -> {v['with']:.3g} K, needs a gain above "
                                                  f"{v['noise_floor']:.2g} K)"))
         thermal["findings"] = [f for f in thermal["findings"] if f["effect"] not in refused]
-        if "iron_loss" in refused:
-            thermal["extra_heat"] = None
+    if not any(f["effect"] == "iron_loss" for f in thermal["findings"]):
+        thermal["extra_heat"] = None      # iron-loss heat only with an accepted iron_loss finding
     if thermal["findings"]:
         new_params, tnotes, tns = refit.apply_thermal(new_params, thermal)
         param_notes += tnotes
@@ -314,7 +327,8 @@ def _diagnose(signals, params: ActuatorParams, options: DiagnoseOptions) -> Diag
                                   for eq in ctx.blocks},
                "replay": {"all_windows_nominal": _strip(replay_nominal),
                           "holdout": {k: _strip(v) for k, v in replay_ho.items()} if replay_ho else None},
-               "thermal": thermal_cmp}
+               "thermal": thermal_cmp,
+               "output_error_refit": {k: v for k, v in oe.items() if k != "params"} if oe else None}
     say(f"6/6 show: {verdict} ({timing['show']:.2f} s; total {timing['total']:.2f} s)")
     report = DiagnosisReport(
         channels=channels, findings=findings, windows=windows,

@@ -290,6 +290,34 @@ def replay(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], le
     windows for plots."""
     if not starts or "i_q" not in ctx.sig or "omega" not in ctx.sig:
         return [{"available": False} for _ in param_sets]
+    r = simulate_windows(ctx, param_sets, starts, length)
+    nW, nP = len(starts), len(param_sets)
+    sim_i, sim_w, sim_th, sim_v = r["sim_i"], r["sim_w"], r["sim_th"], r["sim_v"]
+    meas_i, meas_w, meas_th, meas_v, idx = r["meas_i"], r["meas_w"], r["meas_th"], r["meas_v"], r["idx"]
+    out = []
+    show = np.unique(np.linspace(0, nW - 1, min(4, nW)).round().astype(int))
+    for j in range(nP):
+        sl = np.arange(j * nW, (j + 1) * nW)
+        ei, ew, eth = sim_i[:, sl] - meas_i[:, sl], sim_w[:, sl] - meas_w[:, sl], sim_th[:, sl] - meas_th[:, sl]
+        out.append({"available": True, "windows": nW, "window_s": length,
+                    "per_window": {"current": np.sqrt(np.mean(ei ** 2, axis=0)),
+                                   "velocity": np.sqrt(np.mean(ew ** 2, axis=0)),
+                                   "voltage": (np.sqrt(np.mean((sim_v[:, sl] - meas_v[:, sl]) ** 2, axis=0))
+                                               if meas_v is not None else None)},
+                    "current_rms": float(np.sqrt(np.mean(ei ** 2))), "velocity_rms": float(np.sqrt(np.mean(ew ** 2))),
+                    "position_rms": float(np.sqrt(np.mean(eth ** 2))),
+                    "trace": {"t": ctx.t[idx[:, sl[show]]].T.tolist(),
+                              "sim_velocity": sim_w[:, sl[show]].T.tolist(),
+                              "meas_velocity": meas_w[:, sl[show]].T.tolist(),
+                              "sim_current": sim_i[:, sl[show]].T.tolist(),
+                              "meas_current": meas_i[:, sl[show]].T.tolist()}})
+    return out
+
+
+def simulate_windows(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], length: float) -> dict:
+    """Multiple shooting: every window started from the recorded state and simulated under every parameter set
+    in ONE :class:`BatchActuator` run. Returns the simulated and measured (low-passed) current, speed, angle and
+    q voltage as ``(samples, sets x windows)`` arrays (set-major columns) and the sample indices."""
     L = max(5, int(round(length * ctx.fs)))
     nW, nP = len(starts), len(param_sets)
     plist = []
@@ -338,26 +366,9 @@ def replay(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], le
         sim_th[k] = b.field("theta")
         sim_v[k] = b.field("v").imag
     idx = st[None, :] + np.arange(1, L + 1)[:, None]
-    meas_i, meas_w, meas_th = i_meas[idx], w_meas[idx], S["theta"][idx]
     meas_v = ctx.dec.lowpass(S["v_q"])[idx] if "v_q" in S else None
-    out = []
-    show = np.unique(np.linspace(0, nW - 1, min(4, nW)).round().astype(int))
-    for j in range(nP):
-        sl = np.arange(j * nW, (j + 1) * nW)
-        ei, ew, eth = sim_i[:, sl] - meas_i[:, sl], sim_w[:, sl] - meas_w[:, sl], sim_th[:, sl] - meas_th[:, sl]
-        out.append({"available": True, "windows": nW, "window_s": length,
-                    "per_window": {"current": np.sqrt(np.mean(ei ** 2, axis=0)),
-                                   "velocity": np.sqrt(np.mean(ew ** 2, axis=0)),
-                                   "voltage": (np.sqrt(np.mean((sim_v[:, sl] - meas_v[:, sl]) ** 2, axis=0))
-                                               if meas_v is not None else None)},
-                    "current_rms": float(np.sqrt(np.mean(ei ** 2))), "velocity_rms": float(np.sqrt(np.mean(ew ** 2))),
-                    "position_rms": float(np.sqrt(np.mean(eth ** 2))),
-                    "trace": {"t": ctx.t[idx[:, sl[show]]].T.tolist(),
-                              "sim_velocity": sim_w[:, sl[show]].T.tolist(),
-                              "meas_velocity": meas_w[:, sl[show]].T.tolist(),
-                              "sim_current": sim_i[:, sl[show]].T.tolist(),
-                              "meas_current": meas_i[:, sl[show]].T.tolist()}})
-    return out
+    return {"sim_i": sim_i, "sim_w": sim_w, "sim_th": sim_th, "sim_v": sim_v, "meas_i": i_meas[idx],
+            "meas_w": w_meas[idx], "meas_th": S["theta"][idx], "meas_v": meas_v, "idx": idx}
 
 
 # -- thermal --------------------------------------------------------------------------------------

@@ -130,6 +130,8 @@ def main(args) -> int:
     trend = trends.alerts(rows, alpha=args.alpha, min_change=args.min_change)
     recordings = len({(r["recording"], r["joint"]) for r in rows})
     summary = {"files": res.files, "recordings": recordings, "seconds": res.seconds, "workers": res.workers,
+               "input_profiles": {k: len({r["recording"] for r in rows if (r.get("profile") or "") == k})
+                                  for k in sorted({r.get("profile") or "" for r in rows})},
                "scheduler": res.scheduler,
                "recordings_per_minute": 60.0 * recordings / res.seconds if res.seconds > 0 else None}
     doc = {"summary": summary, "alpha": args.alpha, "min_change": args.min_change,
@@ -142,6 +144,10 @@ def main(args) -> int:
     print(f"fleet: {recordings} recording x joint from {res.files} file(s) in {res.seconds:.1f} s "
           f"({summary['recordings_per_minute'] or 0:.1f} per minute, {res.workers} worker(s)); "
           f"{len(res.failures)} failure(s); {len(trend['alerts'])} alert(s)")
+    by_profile: dict[str, set] = {}
+    for r in rows:
+        by_profile.setdefault(r.get("profile") or "(own MCAP / canonical CSV)", set()).add(r["recording"])
+    print("  input profiles: " + ", ".join(f"{k} x {len(v)}" for k, v in sorted(by_profile.items())))
     for a in trend["alerts"]:
         print(f"  ALERT {a['message']}")
     for f in res.failures:
