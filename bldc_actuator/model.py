@@ -45,6 +45,7 @@ import numpy as np
 from . import effects, frames, kernel
 from .kernel import COMPILED, COEF_DTYPE, STATE_DTYPE, warm_up  # noqa: F401  (public)
 from .params import ActuatorParams
+from .profiles import SimResult  # noqa: F401  (public: Actuator.run returns it)
 
 TWO_PI = 2.0 * math.pi
 
@@ -578,21 +579,6 @@ class BatchActuator(_Base):
             for key, val in zip(("i_line_a", "i_line_b", "i_line_c"), (la, lb, lc)):
                 out[key] = np.where(delta, val, out[key])
         return out
-
-
-
-@dataclass
-class SimResult:
-    """Signals sampled over a run: each field an array over sample times (see :func:`Actuator.outputs`)."""
-
-    signals: dict[str, np.ndarray]
-    params: ActuatorParams
-
-    def __getitem__(self, key: str) -> np.ndarray:
-        return self.signals[key]
-
-    def keys(self):
-        return self.signals.keys()
 
 
 STATE_FIELDS = tuple(f.name for f in fields(ActuatorState))

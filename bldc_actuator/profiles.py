@@ -18,6 +18,20 @@ KINDS = ("current", "torque")
 
 
 @dataclass
+class SimResult:
+    """Signals sampled over a run: each field an array over sample times (see :func:`Actuator.outputs`)."""
+
+    signals: dict[str, np.ndarray]
+    params: object                      #: the :class:`~bldc_actuator.params.ActuatorParams` of the run
+
+    def __getitem__(self, key: str) -> np.ndarray:
+        return self.signals[key]
+
+    def keys(self):
+        return self.signals.keys()
+
+
+@dataclass
 class Profile:
     t: np.ndarray                       #: sample times [s], strictly increasing, t[0] = 0 usually
     values: np.ndarray                  #: command at each sample (held until the next)
@@ -122,7 +136,6 @@ def from_csv(path: str | Path) -> Profile:
 def run_profile(actuator, profile: Profile, *, record_every: float | None = None):
     """Drive ``actuator`` with ``profile``; record outputs at every profile sample (or every
     ``record_every`` seconds). Returns a :class:`SimResult`."""
-    from .model import SimResult
 
     setter = actuator.set_current_command if profile.kind == "current" else actuator.set_torque_command
     t_ns = np.round(profile.t * 1e9).astype(np.int64)

@@ -34,6 +34,7 @@ from . import candidates as cands
 from . import equation_error as ee
 from . import locate as loc_mod
 from . import base_model, judge, output_error, refit, significance
+from .threads import SingleThreadedBLAS
 from .report import DiagnosisReport
 from .selection import GateConfig, fit_model, forward_select
 
@@ -65,41 +66,7 @@ class DiagnoseOptions:
         return list(dict.fromkeys(self.effects))
 
 
-class _SingleThreadedBLAS:
-    """Run OpenBLAS single-threaded while diagnosing (what threadpoolctl does, without the dependency).
-
-    Every product here is small (tens of columns); on a busy 2-core machine OpenBLAS's thread pool turns a
-    30000-element dot product from 10 µs into 8 ms. Restores the previous thread counts on exit; does
-    nothing where the library or its symbols are not found."""
-
-    NAMES = (("scipy_openblas_get_num_threads64_", "scipy_openblas_set_num_threads64_"),
-             ("scipy_openblas_get_num_threads", "scipy_openblas_set_num_threads"),
-             ("openblas_get_num_threads64_", "openblas_set_num_threads64_"),
-             ("openblas_get_num_threads", "openblas_set_num_threads"))
-
-    def __enter__(self):
-        self.saved = []
-        try:
-            import ctypes
-
-            with open("/proc/self/maps") as fh:
-                libs = {line.split()[-1] for line in fh if "openblas" in line.lower() and "/" in line}
-            for path in libs:
-                lib = ctypes.CDLL(path)
-                for get, set_ in self.NAMES:
-                    if hasattr(lib, get) and hasattr(lib, set_):
-                        n = int(getattr(lib, get)())
-                        getattr(lib, set_)(1)
-                        self.saved.append((getattr(lib, set_), n))
-                        break
-        except Exception:  # noqa: BLE001 - best effort (no /proc, another BLAS...)
-            pass
-        return self
-
-    def __exit__(self, *exc):
-        for setter, n in self.saved:
-            setter(n)
-        return False
+_SingleThreadedBLAS = SingleThreadedBLAS   # the name other modules imported
 
 
 def _progress(options: DiagnoseOptions) -> Callable[[str], None]:

@@ -117,7 +117,7 @@ class DiagnosisReport:
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
         if plots and self._internals:
-            from .pipeline import _SingleThreadedBLAS
+            from .threads import SingleThreadedBLAS as _SingleThreadedBLAS
 
             with _SingleThreadedBLAS():
                 images = _plots(self, directory)

@@ -106,7 +106,7 @@ def _single_threaded_blas():
     import contextlib
 
     try:
-        from ..diagnosis.pipeline import _SingleThreadedBLAS
+        from ..diagnosis.threads import SingleThreadedBLAS as _SingleThreadedBLAS
     except ImportError:
         return contextlib.nullcontext()
     return _SingleThreadedBLAS()
