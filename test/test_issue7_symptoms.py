@@ -95,3 +95,31 @@ def test_symptom3_short_run_names_no_thermal_network(tmp_path):
     rep, _ = _diagnose(case, tmp_path)
     assert "thermal_parameters" not in [f["effect"] for f in rep["findings"]]
     assert [f["effect"] for f in rep["findings"]] == []
+
+
+@pytest.mark.slow
+def test_symptom5_sensor_offset_ripple_is_written_back_and_simulated(tmp_path):
+    """An order-p electrical-angle ripple from current-sensor offsets was 'named but not simulated': now the
+    offsets are written to drive.current_sensor_offset_a/_b, the simulated controller acts on them and the
+    replay compares the simulated SENSOR current with the recorded one."""
+    from bldc_actuator.diagnosis import cleaning, loaders
+    from bldc_actuator.diagnosis.pipeline import DiagnoseOptions, diagnose
+
+    case = C.get_case("electrical_ripple")
+    C.generate([case], tmp_path, workers=2)
+    d = tmp_path / case.name
+    p = C.nominal_params(case)
+    tr = cleaning.clean(loaders.load(d / "train.csv", params=p), params=p)
+    ho = cleaning.clean(loaders.load(d / "heldout.csv", params=p), params=p)
+    rep = diagnose(tr, p, options=DiagnoseOptions(holdout_signals=ho, progress=False))
+    doc = rep.to_dict()
+    assert [f["effect"] for f in doc["findings"]] == ["electrical_angle_ripple"]
+    assert doc["findings"][0]["simulation"]["verdict"] == "confirmed"
+    assert "electrical_angle_ripple" not in (doc.get("not_simulated") or [])
+    off_a, off_b = case.plant["sensor:offset_a"], case.plant["sensor:offset_b"]
+    assert rep.updated_params.drive.current_sensor_offset_a == pytest.approx(off_a, abs=0.1 * abs(off_a))
+    assert rep.updated_params.drive.current_sensor_offset_b == pytest.approx(off_b, abs=0.1 * abs(off_b))
+    before, after = _replay(doc, "velocity_rms")
+    assert after < 0.5 * before
+    cb, ca = _replay(doc, "current_rms")
+    assert ca <= cb * 1.01

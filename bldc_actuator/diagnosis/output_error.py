@@ -130,7 +130,7 @@ def refit(ctx, nominal: ActuatorParams, updated: ActuatorParams, starts_train: l
     ho_oe = _rms_pair(ctx, p_oe, starts_holdout, length)
     not_worse = all(b <= a * (1 + MIN_GAIN) for a, b in zip(ho_ee, ho_oe))
     better = any(b < a * (1 - MIN_GAIN) for a, b in zip(ho_ee, ho_oe))
-    kept = bool(not_worse and better and sol.status > 0)
+    kept = bool(not_worse and better and sol.status >= 0)
     reason = ("kept: the simulated held-out speed/current errors improve" if kept else
               "not kept: the equation-error values simulate the held-out windows as well or better")
     return {"available": True, "kept": kept, "reason": reason, "method": "multiple shooting, scipy least_squares",

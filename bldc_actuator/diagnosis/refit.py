@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from .. import effects
+from .. import effects, frames
 from ..model import BatchActuator
 from ..params import SPECS, ActuatorParams, from_flat
 from .candidates import Candidate
@@ -183,6 +183,19 @@ def _rescale_by_torque_constant(pars: dict[str, dict], lib: dict[str, Candidate]
             info["scaled_by_torque_constant"] = kappa
 
 
+def sensor_offsets_for_q_ripple(c: float, s: float) -> tuple[float, float]:
+    """Phase-a/b current-sensor offsets [A] whose measured q-current error is ``c cos θ_e + s sin θ_e`` (the
+    fitted order-p ripple): the error is linear in the offsets, so two angles of
+    :func:`bldc_actuator.frames.abc_to_dq` (the transform the simulated controller uses) give the 2 x 2 map."""
+    def e_q(o_a, o_b, th):
+        return float(frames.abc_to_dq(o_a, o_b, -(o_a + o_b), th)[1])
+
+    M = np.array([[e_q(1.0, 0.0, 0.0), e_q(0.0, 1.0, 0.0)],
+                  [e_q(1.0, 0.0, math.pi / 2), e_q(0.0, 1.0, math.pi / 2)]])
+    o_a, o_b = np.linalg.solve(M, np.array([c, s]))
+    return float(o_a), float(o_b)
+
+
 def updated_params(ctx: Context, sel: SelectionResult, pars: dict[str, dict], lib: dict[str, Candidate]):
     """New :class:`ActuatorParams` with the accepted effects switched on; returns (params, notes, not_simulated)."""
     flat = ctx.params.to_flat()
@@ -192,6 +205,13 @@ def updated_params(ctx: Context, sel: SelectionResult, pars: dict[str, dict], li
     for a in sel.accepted:
         cand = lib[a.effect]
         p = pars[a.effect]
+        if a.effect == "electrical_angle_ripple" and a.variant.hyper.get("kind") == "offset":
+            o_a, o_b = sensor_offsets_for_q_ripple(p["_cos"]["value"], p["_sin"]["value"])
+            flat["drive.current_sensor_offset_a"] = flat["drive.current_sensor_offset_a"] + o_a
+            flat["drive.current_sensor_offset_b"] = flat["drive.current_sensor_offset_b"] + o_b
+            notes.append(f"electrical_angle_ripple (current-sensor offsets) written as drive.current_sensor_offset_a/_b "
+                         f"+= {o_a:.4g} / {o_b:.4g} A: the simulated controller acts on the offset measurement")
+            continue
         if a.effect == "electrical_angle_ripple":
             if a.variant.hyper.get("kind") == "torque" and "cogging_torque" not in accepted \
                     and not ctx.params.effects.cogging_order:
@@ -352,6 +372,8 @@ def simulate_windows(ctx: Context, param_sets: list[ActuatorParams], starts: lis
                 T_housing=T_h0, v_d=R * i_d0 - pp * w0 * Lq * i_q0,
                 v_q=R * i_q0 + K * w0 + pp * w0 * Lq * i_d0, z_d=R * i_d0, z_q=R * i_q0, i_q_ref=cmd[st])
     dt = 1.0 / ctx.fs
+    sensed = any(p.drive.current_sensor_offset_a or p.drive.current_sensor_offset_b
+                 or p.drive.current_sensor_gain_a != 1.0 or p.drive.current_sensor_gain_b != 1.0 for p in plist)
     sim_i = np.zeros((L, len(plist)))
     sim_w = np.zeros((L, len(plist)))
     sim_th = np.zeros((L, len(plist)))
@@ -361,7 +383,8 @@ def simulate_windows(ctx: Context, param_sets: list[ActuatorParams], starts: lis
         if load is not None:
             b.set_load_torque(load[st + k])
         b.step(dt)
-        sim_i[k] = b.field("i").imag
+        # the current the drive's sensors report (what the recording holds), not the true winding current
+        sim_i[k] = b.outputs()["i_q_measured"] if sensed else b.field("i").imag
         sim_w[k] = b.field("omega")
         sim_th[k] = b.field("theta")
         sim_v[k] = b.field("v").imag
