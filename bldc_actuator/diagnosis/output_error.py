@@ -29,6 +29,8 @@ from .refit import simulate_windows
 CORE_FIELDS = ("motor.torque_constant_q", "motor.rotor_inertia")
 #: held-out improvement the refit must show over the equation-error values to be kept
 MIN_GAIN = 0.01
+#: training windows the refit simulates (thinned evenly beyond this)
+MAX_TRAIN_WINDOWS = 60
 
 
 def changed_fields(nominal: ActuatorParams, updated: ActuatorParams) -> list[str]:
@@ -75,6 +77,9 @@ def refit(ctx, nominal: ActuatorParams, updated: ActuatorParams, starts_train: l
 
     if len(starts_train) < 3 or len(starts_holdout) < 3 or "i_q" not in ctx.sig or "omega" not in ctx.sig:
         return {"available": False, "reason": "too few windows", "params": updated}
+    if len(starts_train) > MAX_TRAIN_WINDOWS:                  # evenly thinned: the fit's cost is per window
+        pick = np.linspace(0, len(starts_train) - 1, MAX_TRAIN_WINDOWS).round().astype(int)
+        starts_train = [starts_train[i] for i in pick]
     fields = changed_fields(nominal, updated)
     fields += [f for f in CORE_FIELDS if f not in fields]
     flat0 = updated.to_flat()
