@@ -1,14 +1,18 @@
 """The simulator as the judge of each finding (issue #7): does the simulated actuator — the project's own kernel,
 the code the node runs — reproduce held-out data better WITH the finding than without it?
 
-One entry point, :func:`simulate_findings`: for every accepted equation-error finding it builds the updated
+:func:`simulate_findings`: for every accepted equation-error finding it builds the updated
 parameters without that finding (leave one out), replays the held-out windows under all parameter sets in ONE
 ``BatchActuator`` run (multiple shooting from recorded states, :func:`.refit.replay`), and compares, window by
 window, the simulated error of the finding's channel (speed for torque-side effects, current for voltage-side
 and tracking effects). The noise floor is the spread of that paired difference over windows: a finding is
 ``confirmed`` when the mean improvement exceeds ``z`` standard errors, ``worsens`` when the other channel gets
 worse by more than that AND by more than ``tolerance`` (the practical-significance tolerance, default 5 %) of its
-error: a term that fixes its own channel several-fold is not refused for a 1 % side effect the windows resolve. Plain data in and out.
+error: a term that fixes its own channel several-fold is not refused for a 1 % side effect the windows resolve.
+
+:func:`arbitrate_aliases` lets the same replay decide between aliased forms (the simpler one when it cannot tell
+them apart); :func:`judge_thermal` judges thermal-network findings by the full-length thermal simulation. Plain
+data in and out.
 """
 
 from __future__ import annotations
@@ -122,3 +126,77 @@ def judge_thermal(ctx, linear_params, thermal: dict[str, Any]) -> dict[str, dict
                             "noise_floor": floor, "verdict": verdict,
                             "method": "full-length thermal simulation from the measured current, held-out samples"}
     return out
+
+
+def _updated(ctx, sel, lib):
+    ff = refit.final_fit(ctx, sel)
+    return refit.updated_params(ctx, sel, refit.effect_parameters(ctx, sel, ff, lib), lib)[0]
+
+
+def arbitrate_aliases(ctx, sel, reselect, lib, starts: list[int], window_s: float, z: float = 2.0,
+                      progress=None):
+    """Aliases decided by the simulator. Equation error chose ``chosen`` over an aliased alternative (their fitted
+    contributions correlate > 0.9) by a small margin of held-out equation error; a form with more parameters can
+    win that way by fitting noise (on fresh seeds a hidden friction asymmetry was named a position-dependent load:
+    sin/cos of the angle + constant, aliased with the constant offset while moving). Here the selection is run again
+    without ``chosen`` (``reselect(names_excluded)``) and both models replay the held-out windows: the alternative
+    replaces ``chosen`` when it simulates its channel better beyond the paired noise floor, or — the simulator
+    cannot tell them apart — when it has fewer parameters, and it worsens no simulated channel beyond that floor.
+    Returns the (possibly new) selection and one record per alias examined."""
+    say = progress or (lambda m: None)
+    records: list[dict[str, Any]] = []
+    if not starts:
+        return sel, records
+    for al in list(sel.aliases):
+        chosen = al.get("chosen")
+        acc = {a.effect: a for a in sel.accepted}
+        if chosen not in acc:
+            continue
+        alt = next((e for e in al["effects"] if e != chosen), None)
+        if alt is None or alt in acc:
+            continue
+        sel2 = reselect({chosen})
+        acc2 = {a.effect: a for a in sel2.accepted}
+        if alt not in acc2 or set(acc2) - {alt} != set(acc) - {chosen}:
+            records.append({"effects": [chosen, alt], "kept": chosen, "reason": "the selection without "
+                            f"{chosen} is not the same model with {alt} in its place"})
+            continue
+        eqs = [q for q in lib[chosen].equations if q in _CHANNEL]
+        ch = _CHANNEL[eqs[0]] if eqs else "velocity"
+        r = refit.replay(ctx, [_updated(ctx, sel, lib), _updated(ctx, sel2, lib)], starts, window_s)
+        if not r or not r[0].get("available"):
+            continue
+        if ch == "voltage" and r[0]["per_window"].get("voltage") is None:
+            ch = "current"
+        gain, se = _paired(r[0]["per_window"][ch], r[1]["per_window"][ch])      # >0: the alternative is better
+        worse = []
+        for c in ("velocity", "current", "voltage"):
+            if c == ch or r[0]["per_window"].get(c) is None:
+                continue
+            g, s_ = _paired(r[0]["per_window"][c], r[1]["per_window"][c])
+            if math.isfinite(g) and g < -z * s_ and g < -0.01 * float(np.mean(r[0]["per_window"][c])):
+                worse.append(c)
+        n0, n1 = len(acc[chosen].added), len(acc2[alt].added)
+        if not math.isfinite(gain) or worse:
+            swap, why = False, f"the alternative worsens the simulated {', '.join(worse) or ch}"
+        elif gain > z * se:
+            swap, why = True, f"{alt} simulates the held-out {ch} better ({gain:+.3g} > noise floor {z * se:.2g})"
+        elif gain >= -z * se and n1 < n0:
+            swap, why = True, (f"the held-out simulation cannot tell them apart ({ch} error difference {gain:+.3g}, "
+                               f"noise floor {z * se:.2g}): the simpler form ({n1} vs {n0} parameters) is kept")
+        else:
+            swap, why = False, (f"{alt} does not simulate the held-out {ch} better beyond the noise floor (error "
+                                f"difference {gain:+.3g}, floor {z * se:.2g}) and has no fewer parameters")
+        rec = {"effects": [chosen, alt], "kept": alt if swap else chosen, "channel": ch,
+               "error": {chosen: float(np.mean(r[0]["per_window"][ch])), alt: float(np.mean(r[1]["per_window"][ch]))},
+               "noise_floor": z * se, "reason": why}
+        records.append(rec)
+        say(f"alias {chosen} ~ {alt}: {rec['kept']} kept ({why})")
+        if swap:
+            sel2.aliases = [x for x in sel2.aliases if set(x["effects"]) != {chosen, alt}] + [
+                dict(al, chosen=alt, decided_by=why)]
+            sel2.rejected = [x for x in sel2.rejected if x.get("effect") != chosen] + [
+                {"effect": chosen, "form": acc[chosen].variant.label,
+                 "reason": f"explains the same residual as {alt} (aliased); {why}"}]
+            sel = sel2
+    return sel, records

@@ -160,6 +160,12 @@ def _diagnose(signals, params: ActuatorParams, options: DiagnoseOptions) -> Diag
     t0 = time.perf_counter()
     linear = [n for n in names if n not in cands.SPECIAL]
     sel = forward_select(ctx, located, lib, linear, options.gate, progress=lambda m: say(f"4/6 attribute: {m}"))
+    alias_records: list[dict] = []
+    if options.simulation_gate and options.replay and starts_ho and sel.aliases:
+        # aliased forms: the held-out simulation decides (the simpler one when it cannot tell them apart)
+        sel, alias_records = judge.arbitrate_aliases(
+            ctx, sel, lambda out: forward_select(ctx, located, lib, [n for n in linear if n not in out], options.gate),
+            lib, starts_ho, options.window_s, progress=lambda m: say(f"4/6 attribute: {m}"))
     thermal = refit.thermal_select(ctx, [n for n in names if n in cands.THERMAL], lib, options.gate)
     vsat = refit.voltage_saturation_check(ctx, lib, options.gate, "voltage_saturation" in names)
     for k in ("findings", "rejected", "not_checkable"):
@@ -287,7 +293,8 @@ def _diagnose(signals, params: ActuatorParams, options: DiagnoseOptions) -> Diag
                         "message": f"cannot tell {A} from {B} with this data (their fitted contributions "
                                    f"correlate {a['correlation']:.2f}); "
                                    + (f"{a['chosen']} was kept" if a["chosen"] else
-                                      "neither was kept: together they fit implausible values"),
+                                      "neither was kept: together they fit implausible values")
+                                   + (f" ({a['decided_by']})" if a.get("decided_by") else ""),
                         "experiment": exp})
     final_metrics = _ee_metrics(ctx, sel.final_fit)
     compare = {"equation_error": {eq: {"nominal": _ee_metrics(ctx, sel.base_fit)[eq], "updated": final_metrics[eq]}
@@ -295,7 +302,8 @@ def _diagnose(signals, params: ActuatorParams, options: DiagnoseOptions) -> Diag
                "replay": {"all_windows_nominal": _strip(replay_nominal),
                           "holdout": {k: _strip(v) for k, v in replay_ho.items()} if replay_ho else None},
                "thermal": thermal_cmp,
-               "output_error_refit": {k: v for k, v in oe.items() if k != "params"} if oe else None}
+               "output_error_refit": {k: v for k, v in oe.items() if k != "params"} if oe else None,
+               "alias_simulation": alias_records or None}
     say(f"6/6 show: {verdict} ({timing['show']:.2f} s; total {timing['total']:.2f} s)")
     report = DiagnosisReport(
         channels=channels, findings=findings, windows=windows,
