@@ -149,6 +149,9 @@ class Case:
     #: how the robot logs (see :func:`logged`): ``{"rate": Hz, "filter": "sample" | "mean"}``; {} = every
     #: sample of the 1 kHz joint controller
     log: dict = field(default_factory=dict)
+    #: Drive fields of the world the recording comes from, not a hidden effect (the effect-free twin has them
+    #: too): e.g. the speed estimator's bandwidth, a sensor filter the user's model does not describe
+    environment: dict = field(default_factory=dict)
 
     @property
     def is_null(self) -> bool:
@@ -199,7 +202,7 @@ def truth_specs(case: Case, *, effect: bool = True, noise: bool = True) -> tuple
     same noise), ``noise=False``: ideal sensors — the twins used to measure effect and noise RMS."""
     params = nominal_params(case)
     plant = _plant_from_nominal(params)
-    drive = _drive_from_nominal(params)
+    drive = replace(_drive_from_nominal(params), **case.environment)
     sensors = SENSORS
     if effect:
         plant = replace(plant, **{k: v for k, v in case.plant.items() if not k.startswith("sensor:")})
@@ -328,7 +331,7 @@ CASES: tuple[Case, ...] = (
          heldout=Excitation("multisine", 30.0, 46), seed=45),
     Case("null_slow_drive", (), "nothing hidden: a drive tuned to a 250 Hz current loop with a 100 Hz speed "
          "estimator, logged at 250 Hz (sampled)", {},
-         nominal={"drive.current_loop_bandwidth": 250.0}, drive={"pll_bandwidth": 100.0},
+         nominal={"drive.current_loop_bandwidth": 250.0}, environment={"pll_bandwidth": 100.0},
          train=Excitation("mixed", 40.0, 47), heldout=Excitation("multisine", 20.0, 48), seed=47,
          log={"rate": 250.0, "filter": "sample"}),
     Case("coulomb_250hz", ("coulomb_friction",), "Coulomb friction left out; logged at 250 Hz by an averaging "
@@ -337,7 +340,7 @@ CASES: tuple[Case, ...] = (
     Case("viscous_slow_drive", ("viscous_friction",), "viscous friction 21x too small; a drive tuned to a 250 Hz "
          "current loop with a 100 Hz speed estimator",
          {"viscous_friction": {"viscous_damping": 2.1e-4}}, plant={"b": 2.1e-4},
-         nominal={"drive.current_loop_bandwidth": 250.0}, drive={"pll_bandwidth": 100.0}, seed=51),
+         nominal={"drive.current_loop_bandwidth": 250.0}, environment={"pll_bandwidth": 100.0}, seed=51),
 )
 
 
