@@ -11,7 +11,8 @@ worse by more than that AND by more than ``tolerance`` (the practical-significan
 error: a term that fixes its own channel several-fold is not refused for a 1 % side effect the windows resolve.
 
 :func:`arbitrate_aliases` lets the same replay decide between aliased forms (the simpler one when it cannot tell
-them apart); :func:`judge_thermal` judges thermal-network findings by the full-length thermal simulation. Plain
+them apart); :func:`judge_voltage_limit` replays the drive's fitted voltage limit; :func:`judge_thermal` judges
+thermal-network findings by the full-length thermal simulation. Plain
 data in and out.
 """
 
@@ -65,21 +66,47 @@ def simulate_findings(ctx, sel, pars, lib, starts: list[int], window_s: float, z
         if ch == "voltage" and w_full.get("voltage") is None:
             ch = "current"
         other = "current" if ch == "velocity" else "velocity"
-        imp, se = _paired(r["per_window"][ch], w_full[ch])          # error without - error with
-        imp_o, se_o = _paired(r["per_window"][other], w_full[other])
-        if not math.isfinite(imp):
-            verdict = "not checkable in simulation"
-        elif math.isfinite(imp_o) and imp_o < -z * se_o and imp_o < -tolerance * float(np.mean(w_full[other])):
-            verdict = f"worsens the simulated {other}"
-        elif imp > z * se and imp > 0:
-            verdict = "confirmed"
-        else:
-            verdict = "not confirmed"
-        out[e] = {"channel": ch, "without": float(np.mean(r["per_window"][ch])), "with": float(np.mean(w_full[ch])),
-                  "improvement": imp, "noise_floor": z * se, "other_channel": other,
-                  "other_channel_change": -imp_o if math.isfinite(imp_o) else None, "verdict": verdict,
-                  "windows": len(starts), "window_s": window_s}
+        out[e] = _verdict(r["per_window"], w_full, ch, other, z, tolerance, len(starts), window_s)
     return out
+
+
+def _verdict(without: dict, with_: dict, ch: str, other: str, z: float, tolerance: float, n: int,
+             window_s: float) -> dict[str, Any]:
+    """The leave-one-out verdict from per-window simulated errors without and with a finding."""
+    imp, se = _paired(without[ch], with_[ch])          # error without - error with
+    imp_o, se_o = _paired(without[other], with_[other])
+    if not math.isfinite(imp):
+        verdict = "not checkable in simulation"
+    elif math.isfinite(imp_o) and imp_o < -z * se_o and imp_o < -tolerance * float(np.mean(with_[other])):
+        verdict = f"worsens the simulated {other}"
+    elif imp > z * se and imp > 0:
+        verdict = "confirmed"
+    else:
+        verdict = "not confirmed"
+    return {"channel": ch, "without": float(np.mean(without[ch])), "with": float(np.mean(with_[ch])),
+            "improvement": imp, "noise_floor": z * se, "other_channel": other,
+            "other_channel_change": -imp_o if math.isfinite(imp_o) else None, "verdict": verdict,
+            "windows": n, "window_s": window_s}
+
+
+def judge_voltage_limit(ctx, params_with, finding: dict[str, Any], starts: list[int], window_s: float,
+                        z: float = 2.0, tolerance: float = 0.05) -> dict[str, Any]:
+    """voltage_saturation (the drive's modulation limit): the held-out windows replayed with the fitted limit and
+    with the nominal one; judged on the simulated current (the drive stops tracking its command at the limit),
+    the speed being the other channel. When the held-out recording never nears the limit the equation-error check
+    fell back to training blocks and the simulation cannot judge it: "not checkable in simulation"."""
+    if not finding.get("heldout_nears_limit", True):
+        return {"channel": None, "verdict": "not checkable in simulation",
+                "reason": "the held-out recording never nears the voltage limit"}
+    if not starts:
+        return {"channel": None, "verdict": "not checkable in simulation", "reason": "no held-out windows"}
+    fld = "drive.modulation_limit"
+    without = params_with.replace(**{fld: ctx.params.drive.modulation_limit})
+    res = refit.replay(ctx, [without, params_with], starts, window_s)
+    if not res or not res[0].get("available"):
+        return {"channel": None, "verdict": "not checkable in simulation", "reason": "no replay"}
+    return _verdict(res[0]["per_window"], res[1]["per_window"], "current", "velocity", z, tolerance, len(starts),
+                    window_s)
 
 
 #: a thermal finding must lower the held-out simulated temperature error by more than this fraction of the

@@ -240,6 +240,18 @@ def _diagnose(signals, params: ActuatorParams, options: DiagnoseOptions) -> Diag
                                                  f"{v['without']:.3g} -> {v['with']:.3g} K, needs a gain above "
                                                  f"{v['noise_floor']:.2g} K)"))
         thermal["findings"] = [f for f in thermal["findings"] if f["effect"] not in refused]
+    # the drive's voltage limit: the held-out windows replayed with the fitted limit and with the nominal one
+    vs = next((f for f in thermal["findings"] if f["effect"] == "voltage_saturation"), None)
+    if vs is not None and options.replay:
+        v = judge.judge_voltage_limit(ctx, refit.apply_thermal(new_params, {"findings": [vs]})[0], vs, starts_ho,
+                                      options.window_s, tolerance=options.tolerance)
+        sim_verdicts["voltage_saturation"] = v
+        if options.simulation_gate and v["verdict"] not in ("confirmed", "not checkable in simulation"):
+            verdicts.append(significance.Verdict("voltage_saturation", "not_confirmed_in_simulation",
+                                                 f"voltage_saturation: {v['verdict']} (held-out simulated current "
+                                                 f"error {v['without']:.3g} -> {v['with']:.3g} A, noise floor "
+                                                 f"{v['noise_floor']:.2g} A)"))
+            thermal["findings"] = [f for f in thermal["findings"] if f is not vs]
     if not any(f["effect"] == "iron_loss" for f in thermal["findings"]):
         thermal["extra_heat"] = None      # iron-loss heat only with an accepted iron_loss finding
     if thermal["findings"]:

@@ -721,7 +721,7 @@ def voltage_saturation_check(ctx: Context, lib: dict[str, Candidate], gate, want
         "effect": cand.name, "description": cand.description, "form": "current tracking vs voltage limit",
         "parameters": {"voltage_limit_ratio": c_hat}, "uncertainty": {"voltage_limit_ratio": sd},
         "units": {"voltage_limit_ratio": ""}, "fields": {"voltage_limit_ratio": "drive.modulation_limit"},
-        "simulated": True, "evidence": ev,
+        "simulated": True, "evidence": ev, "heldout_nears_limit": not cv_note,
         "held_out": {"metric": "current-tracking error RMS (held-out)", "unit": "A", "before": e0, "after": e1},
         "metrics": [{"metric": "current-tracking error RMS (held-out)", "unit": "A", "before": e0, "after": e1}],
         "delta_bic": dbic, "round": 1, "correlations": []})
