@@ -57,6 +57,9 @@ def simulate_findings(ctx, sel, pars, lib, starts: list[int], window_s: float, z
         return {}
     out: dict[str, dict[str, Any]] = {}
     w_full = res[0]["per_window"]
+    signal = res[0].get("signal_rms") or {}
+    temps = any(c in ctx.have for c in ("winding_temperature", "housing_temperature")) and "i_q" in ctx.sig
+    th_full = _thermal_holdout(ctx, full, None) if temps else float("nan")
     for e, r, p_without in zip(effects, res[1:], sets[1:]):
         if p_without == full:   # no simulator term (e.g. a current-dependent angle ripple): cannot be judged here
             out[e] = {"verdict": "not simulated", "channel": None}
@@ -66,17 +69,37 @@ def simulate_findings(ctx, sel, pars, lib, starts: list[int], window_s: float, z
         if ch == "voltage" and w_full.get("voltage") is None:
             ch = "current"
         other = "current" if ch == "velocity" else "velocity"
-        out[e] = _verdict(r["per_window"], w_full, ch, other, z, tolerance, len(starts), window_s)
+        out[e] = _verdict(r["per_window"], w_full, ch, other, z, tolerance, len(starts), window_s, signal)
+        if temps and out[e]["verdict"] == "confirmed":
+            # the temperatures are simulated channels too (R, R(T) and the torque constant set the heat)
+            th_without = _thermal_holdout(ctx, p_without, None)
+            loss = th_full - th_without
+            floor = max(THERMAL_MIN_KELVIN, THERMAL_MIN_GAIN * th_without)
+            out[e]["temperature"] = {"without": th_without, "with": th_full, "noise_floor": floor}
+            if math.isfinite(loss) and loss > floor:
+                out[e]["verdict"] = "worsens the simulated temperature"
     return out
 
 
+#: the simulation can judge a channel only where it reproduces the recording at all: with every finding, the
+#: simulated error must stay below this fraction of the recorded channel's own RMS (a 100 Hz log of a loop that
+#: oscillates faster, or a drive unlike the model, is replayed from inputs that do not represent it: improving a
+#: 130 rad/s error by 5 % proves nothing)
+REPRODUCE_MAX = 0.5
+
+
 def _verdict(without: dict, with_: dict, ch: str, other: str, z: float, tolerance: float, n: int,
-             window_s: float) -> dict[str, Any]:
+             window_s: float, signal: dict | None = None) -> dict[str, Any]:
     """The leave-one-out verdict from per-window simulated errors without and with a finding."""
     imp, se = _paired(without[ch], with_[ch])          # error without - error with
     imp_o, se_o = _paired(without[other], with_[other])
+    sig = (signal or {}).get(ch)
+    err = float(np.sqrt(np.mean(np.square(with_[ch])))) if with_.get(ch) is not None else float("nan")
     if not math.isfinite(imp):
         verdict = "not checkable in simulation"
+    elif sig and err > REPRODUCE_MAX * sig:
+        verdict = (f"not checkable in simulation: the simulated actuator does not reproduce this recording's {ch} "
+                   f"(error {err:.3g} RMS = {100 * err / sig:.0f} % of the recorded {sig:.3g} RMS, with every finding)")
     elif math.isfinite(imp_o) and imp_o < -z * se_o and imp_o < -tolerance * float(np.mean(with_[other])):
         verdict = f"worsens the simulated {other}"
     elif imp > z * se and imp > 0:
@@ -106,7 +129,7 @@ def judge_voltage_limit(ctx, params_with, finding: dict[str, Any], starts: list[
     if not res or not res[0].get("available"):
         return {"channel": None, "verdict": "not checkable in simulation", "reason": "no replay"}
     return _verdict(res[0]["per_window"], res[1]["per_window"], "current", "velocity", z, tolerance, len(starts),
-                    window_s)
+                    window_s, res[1].get("signal_rms"))
 
 
 #: a thermal finding must lower the held-out simulated temperature error by more than this fraction of the

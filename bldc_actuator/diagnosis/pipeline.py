@@ -209,6 +209,7 @@ def _diagnose(signals, params: ActuatorParams, options: DiagnoseOptions) -> Diag
                                                      f"{e}: {v['verdict']} (held-out simulated {v['channel']} error "
                                                      f"{v['without']:.3g} -> {v['with']:.3g}, noise floor "
                                                      f"{v['noise_floor']:.2g})"))
+                say(f"5/6 model: {verdicts[-1].message}")
             sel.accepted = [a for a in sel.accepted if a.effect not in refused]
             ff = refit.final_fit(ctx, sel)
             sel.final_fit = ff.fit
@@ -297,6 +298,13 @@ def _diagnose(signals, params: ActuatorParams, options: DiagnoseOptions) -> Diag
         verdict = "missing physics found: " + ", ".join(accepted_names)
     else:
         verdict = "nothing missing: no candidate effect passed both the ΔBIC and the held-out gate"
+    unreproduced = sorted({v.effect for v in verdicts if "does not reproduce" in v.message})
+    if unreproduced:
+        why = next(sim_verdicts[e]["verdict"].split(": ", 1)[1] for e in unreproduced
+                   if "does not reproduce" in sim_verdicts.get(e, {}).get("verdict", ""))
+        msg = (f"equation error alone suggests {', '.join(unreproduced)}, but {why}: check the logging rate against "
+               f"the control loops' bandwidth and the drive model")
+        verdict = f"{verdict}; not shown in simulation: {msg}" if accepted_names else f"nothing shown in simulation: {msg}"
     aliases = []
     for a in sel.aliases:
         A, B = a["effects"]
