@@ -72,7 +72,7 @@ def test_symptom1_no_false_alarm_when_the_simulation_cannot_follow_a_100hz_log(t
     is named, and the verdict says why."""
     case = replace(C.get_case("null_thermal_100hz"), train=C.Excitation("gait", 60.0, 41, {"amplitude": 0.35}),
                    heldout=C.Excitation("gait", 30.0, 42, {"amplitude": 0.3, "freq": 0.9}),
-                   tuning={"pll_bandwidth": 20.0})
+                   environment={"pll_bandwidth": 20.0})
     from bldc_actuator.diagnosis import cleaning, loaders
     from bldc_actuator.diagnosis.pipeline import DiagnoseOptions, diagnose
 

@@ -137,9 +137,6 @@ class Case:
     truth: dict                           #: effect → {parameter: true value}; the first entry is the main one
     plant: dict = field(default_factory=dict)      #: Plant fields that differ from the nominal belief
     drive: dict = field(default_factory=dict)      #: Drive fields that differ (e.g. modulation limit)
-    #: how this drive is tuned where the nominal file has no field for it (e.g. the speed estimator's bandwidth):
-    #: part of the recording setup, not a hidden effect, so every twin (with and without the effect) has it
-    tuning: dict = field(default_factory=dict)
     nominal: dict = field(default_factory=dict)    #: flat parameter overrides of NOMINAL_BASE
     train: Excitation = Excitation("mixed", 40.0, 1)
     heldout: Excitation = Excitation("multisine", 20.0, 2)
@@ -152,6 +149,9 @@ class Case:
     #: how the robot logs (see :func:`logged`): ``{"rate": Hz, "filter": "sample" | "mean"}``; {} = every
     #: sample of the 1 kHz joint controller
     log: dict = field(default_factory=dict)
+    #: Drive fields of the world the recording comes from, not a hidden effect (the effect-free twin has them
+    #: too): e.g. the speed estimator's bandwidth, a sensor filter the user's model does not describe
+    environment: dict = field(default_factory=dict)
 
     @property
     def is_null(self) -> bool:
@@ -202,7 +202,7 @@ def truth_specs(case: Case, *, effect: bool = True, noise: bool = True) -> tuple
     same noise), ``noise=False``: ideal sensors — the twins used to measure effect and noise RMS."""
     params = nominal_params(case)
     plant = _plant_from_nominal(params)
-    drive = replace(_drive_from_nominal(params), **case.tuning)
+    drive = replace(_drive_from_nominal(params), **case.environment)
     sensors = SENSORS
     if effect:
         plant = replace(plant, **{k: v for k, v in case.plant.items() if not k.startswith("sensor:")})
@@ -334,7 +334,7 @@ CASES: tuple[Case, ...] = (
          heldout=Excitation("multisine", 30.0, 46), seed=45),
     Case("null_slow_drive", (), "nothing hidden: a drive tuned to a 250 Hz current loop with a 100 Hz speed "
          "estimator, logged at 250 Hz (sampled)", {},
-         nominal={"drive.current_loop_bandwidth": 250.0}, tuning={"pll_bandwidth": 100.0},
+         nominal={"drive.current_loop_bandwidth": 250.0}, environment={"pll_bandwidth": 100.0},
          train=Excitation("mixed", 40.0, 47), heldout=Excitation("multisine", 20.0, 48), seed=47,
          log={"rate": 250.0, "filter": "sample"}),
     Case("coulomb_250hz", ("coulomb_friction",), "Coulomb friction left out; logged at 250 Hz by an averaging "
@@ -343,7 +343,7 @@ CASES: tuple[Case, ...] = (
     Case("viscous_slow_drive", ("viscous_friction",), "viscous friction 21x too small; a drive tuned to a 250 Hz "
          "current loop with a 100 Hz speed estimator",
          {"viscous_friction": {"viscous_damping": 2.1e-4}}, plant={"b": 2.1e-4},
-         nominal={"drive.current_loop_bandwidth": 250.0}, tuning={"pll_bandwidth": 100.0}, seed=51),
+         nominal={"drive.current_loop_bandwidth": 250.0}, environment={"pll_bandwidth": 100.0}, seed=51),
 )
 
 
@@ -478,7 +478,7 @@ def generate(cases, outdir: Path, *, progress: Callable[[str], None] | None = No
             "truth": case.truth,
             "alias_ok": {k: list(v) for k, v in case.alias_ok.items()},
             "plant_changes": {k: list(v) if isinstance(v, tuple) else v for k, v in case.plant.items()},
-            "drive_changes": case.drive, "drive_tuning": case.tuning,
+            "drive_changes": case.drive, "environment": case.environment,
             "nominal_overrides": case.nominal,
             "concealment": conc,
             "oracle": ora,

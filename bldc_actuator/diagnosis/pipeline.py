@@ -201,7 +201,8 @@ def _diagnose(signals, params: ActuatorParams, options: DiagnoseOptions) -> Diag
                                            tolerance=options.tolerance) \
         if options.replay and starts_ho else {}
     if options.simulation_gate:
-        refused = {e for e, v in sim_verdicts.items() if v["verdict"] not in ("confirmed", "not simulated")}
+        refused = {e for e, v in sim_verdicts.items()
+                   if v["verdict"] not in ("confirmed", "not simulated", "not checkable in simulation")}
         if refused:
             for e in sorted(refused):
                 v = sim_verdicts[e]
