@@ -210,6 +210,7 @@ def _diagnose(signals, params: ActuatorParams, options: DiagnoseOptions) -> Diag
                                                      f"{e}: {v['verdict']} (held-out simulated {v['channel']} error "
                                                      f"{v['without']:.3g} -> {v['with']:.3g}, noise floor "
                                                      f"{v['noise_floor']:.2g})"))
+                say(f"5/6 model: {verdicts[-1].message}")
             sel.accepted = [a for a in sel.accepted if a.effect not in refused]
             ff = refit.final_fit(ctx, sel)
             sel.final_fit = ff.fit
@@ -241,6 +242,18 @@ def _diagnose(signals, params: ActuatorParams, options: DiagnoseOptions) -> Diag
                                                  f"{v['without']:.3g} -> {v['with']:.3g} K, needs a gain above "
                                                  f"{v['noise_floor']:.2g} K)"))
         thermal["findings"] = [f for f in thermal["findings"] if f["effect"] not in refused]
+    # the drive's voltage limit: the held-out windows replayed with the fitted limit and with the nominal one
+    vs = next((f for f in thermal["findings"] if f["effect"] == "voltage_saturation"), None)
+    if vs is not None and options.replay:
+        v = judge.judge_voltage_limit(ctx, refit.apply_thermal(new_params, {"findings": [vs]})[0], vs, starts_ho,
+                                      options.window_s, tolerance=options.tolerance)
+        sim_verdicts["voltage_saturation"] = v
+        if options.simulation_gate and v["verdict"] not in ("confirmed", "not checkable in simulation"):
+            verdicts.append(significance.Verdict("voltage_saturation", "not_confirmed_in_simulation",
+                                                 f"voltage_saturation: {v['verdict']} (held-out simulated current "
+                                                 f"error {v['without']:.3g} -> {v['with']:.3g} A, noise floor "
+                                                 f"{v['noise_floor']:.2g} A)"))
+            thermal["findings"] = [f for f in thermal["findings"] if f is not vs]
     if not any(f["effect"] == "iron_loss" for f in thermal["findings"]):
         thermal["extra_heat"] = None      # iron-loss heat only with an accepted iron_loss finding
     if thermal["findings"]:
@@ -286,6 +299,13 @@ def _diagnose(signals, params: ActuatorParams, options: DiagnoseOptions) -> Diag
         verdict = "missing physics found: " + ", ".join(accepted_names)
     else:
         verdict = "nothing missing: no candidate effect passed both the ΔBIC and the held-out gate"
+    unreproduced = sorted({v.effect for v in verdicts if "does not reproduce" in v.message})
+    if unreproduced:
+        why = next(sim_verdicts[e]["verdict"].split(": ", 1)[1] for e in unreproduced
+                   if "does not reproduce" in sim_verdicts.get(e, {}).get("verdict", ""))
+        msg = (f"equation error alone suggests {', '.join(unreproduced)}, but {why}: check the logging rate against "
+               f"the control loops' bandwidth and the drive model")
+        verdict = f"{verdict}; not shown in simulation: {msg}" if accepted_names else f"nothing shown in simulation: {msg}"
     aliases = []
     for a in sel.aliases:
         A, B = a["effects"]

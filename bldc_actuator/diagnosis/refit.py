@@ -326,6 +326,11 @@ def replay(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], le
                                                if meas_v is not None else None)},
                     "current_rms": float(np.sqrt(np.mean(ei ** 2))), "velocity_rms": float(np.sqrt(np.mean(ew ** 2))),
                     "position_rms": float(np.sqrt(np.mean(eth ** 2))),
+                    # RMS of the recorded channel itself over the windows: what an error is measured against
+                    "signal_rms": {"current": float(np.sqrt(np.mean(meas_i[:, sl] ** 2))),
+                                   "velocity": float(np.sqrt(np.mean(meas_w[:, sl] ** 2))),
+                                   "voltage": (float(np.sqrt(np.mean(meas_v[:, sl] ** 2)))
+                                               if meas_v is not None else None)},
                     "trace": {"t": ctx.t[idx[:, sl[show]]].T.tolist(),
                               "sim_velocity": sim_w[:, sl[show]].T.tolist(),
                               "meas_velocity": meas_w[:, sl[show]].T.tolist(),
@@ -721,7 +726,7 @@ def voltage_saturation_check(ctx: Context, lib: dict[str, Candidate], gate, want
         "effect": cand.name, "description": cand.description, "form": "current tracking vs voltage limit",
         "parameters": {"voltage_limit_ratio": c_hat}, "uncertainty": {"voltage_limit_ratio": sd},
         "units": {"voltage_limit_ratio": ""}, "fields": {"voltage_limit_ratio": "drive.modulation_limit"},
-        "simulated": True, "evidence": ev,
+        "simulated": True, "evidence": ev, "heldout_nears_limit": not cv_note,
         "held_out": {"metric": "current-tracking error RMS (held-out)", "unit": "A", "before": e0, "after": e1},
         "metrics": [{"metric": "current-tracking error RMS (held-out)", "unit": "A", "before": e0, "after": e1}],
         "delta_bic": dbic, "round": 1, "correlations": []})

@@ -1,4 +1,6 @@
-"""The held-out simulation decides between aliased forms (bldc_actuator/diagnosis/judge.arbitrate_aliases).
+"""The held-out simulation as judge (bldc_actuator/diagnosis/judge.py), beyond the leave-one-out verdicts that
+test_issue7_symptoms.py covers: it decides between aliased forms (arbitrate_aliases) and judges the drive's fitted
+voltage limit (judge_voltage_limit).
 
 On the concealed benchmark's fresh seeds 1 and 2 a hidden friction asymmetry (a constant offset while moving) was
 named position_dependent_load (sin/cos of the output angle + constant: three parameters, the angle terms fitting
@@ -53,3 +55,20 @@ def test_asymmetric_friction_on_a_fresh_seed_is_not_named_a_position_dependent_l
 def test_a_real_gravity_load_keeps_its_angle_terms(tmp_path):
     rep = _diagnose(C.reseeded(C.get_case("gravity"), 1), tmp_path)
     assert [f["effect"] for f in rep["findings"]] == ["position_dependent_load"]
+
+
+@pytest.mark.slow
+def test_the_fitted_voltage_limit_is_judged_by_the_simulated_current(tmp_path):
+    """The modulator reaches 80 % of the SVPWM circle: the fitted drive.modulation_limit makes the simulated drive
+    lose tracking where the real one does (it had no simulation verdict before: accepted unjudged)."""
+    case = C.get_case("v_saturation")
+    rep = _diagnose(case, tmp_path)
+    (f,) = rep["findings"]
+    assert f["effect"] == "voltage_saturation"
+    assert f["parameters"]["voltage_limit_ratio"] == pytest.approx(0.80, rel=0.05)
+    sim = f["simulation"]
+    assert sim["verdict"] == "confirmed" and sim["channel"] == "current"
+    assert sim["with"] < 0.5 * sim["without"]
+    ho = rep["compare"]["replay"]["holdout"]
+    assert ho["after"]["current_rms"] < 0.5 * ho["before"]["current_rms"]
+    assert ho["after"]["velocity_rms"] < 0.5 * ho["before"]["velocity_rms"]
