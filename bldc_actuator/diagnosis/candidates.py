@@ -651,6 +651,13 @@ def library() -> dict[str, Candidate]:
                   "limit): the current stops following its command early", False,
                   {"dead_time": "run at high speed with low current, and at low speed with high current"},
                   None, None, None))
+    add(Candidate("voltage_limit_mode", ("tracking",), ("current", "current_command|torque_command", "velocity|position"),
+                  "the drive shares the voltage circle between d and q differently from the model (proportional "
+                  "scaling, d or q priority, field weakening): only visible where the voltage demand reaches the "
+                  "circle", True,
+                  {"voltage_saturation": "run at the top speed with the d current recorded: the modes differ in "
+                   "i_d, a lower limit does not"},
+                  None, None, None))
     add(Candidate("dead_time", ("electrical",), ("voltage_q", "current", "velocity|position"),
                   "inverter dead time: the applied voltage falls short by a constant times the sign of the current",
                   True, {"coulomb_friction": "friction acts on torque: compare the voltage equation at standstill "
@@ -673,7 +680,8 @@ def library() -> dict[str, Candidate]:
 
 EFFECT_NAMES = tuple(library())
 THERMAL = ("thermal_parameters", "iron_loss")
-SPECIAL = THERMAL + ("voltage_saturation",)   #: checked by output-error routines, not the linear selection
+#: checked by output-error routines and the simulation, not the linear selection
+SPECIAL = THERMAL + ("voltage_saturation", "voltage_limit_mode")
 
 
 # ------------------------------------------------------------------------------------------ evidence

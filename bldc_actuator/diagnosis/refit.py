@@ -342,7 +342,7 @@ def replay(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], le
 def simulate_windows(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], length: float) -> dict:
     """Multiple shooting: every window started from the recorded state and simulated under every parameter set
     in ONE :class:`BatchActuator` run. Returns the simulated and measured (low-passed) current, speed, angle and
-    q voltage as ``(samples, sets x windows)`` arrays (set-major columns) and the sample indices."""
+    q voltage (and the simulated d current ``sim_id``) as ``(samples, sets x windows)`` arrays (set-major columns) and the sample indices."""
     L = max(5, int(round(length * ctx.fs)))
     nW, nP = len(starts), len(param_sets)
     plist = []
@@ -383,19 +383,25 @@ def simulate_windows(ctx: Context, param_sets: list[ActuatorParams], starts: lis
     sim_w = np.zeros((L, len(plist)))
     sim_th = np.zeros((L, len(plist)))
     sim_v = np.zeros((L, len(plist)))          # the drive's q voltage: where voltage-side effects show
+    sim_id = np.zeros((L, len(plist)))         # d current: where the drive's voltage-limit mode shows
     for k in range(L):
         b.set_current_command(cmd[st + k])
         if load is not None:
             b.set_load_torque(load[st + k])
         b.step(dt)
         # the current the drive's sensors report (what the recording holds), not the true winding current
-        sim_i[k] = b.outputs()["i_q_measured"] if sensed else b.field("i").imag
+        if sensed:
+            out = b.outputs()
+            sim_i[k], sim_id[k] = out["i_q_measured"], out["i_d_measured"]
+        else:
+            i = b.field("i")
+            sim_i[k], sim_id[k] = i.imag, i.real
         sim_w[k] = b.field("omega")
         sim_th[k] = b.field("theta")
         sim_v[k] = b.field("v").imag
     idx = st[None, :] + np.arange(1, L + 1)[:, None]
     meas_v = ctx.dec.lowpass(S["v_q"])[idx] if "v_q" in S else None
-    return {"sim_i": sim_i, "sim_w": sim_w, "sim_th": sim_th, "sim_v": sim_v, "meas_i": i_meas[idx],
+    return {"sim_i": sim_i, "sim_w": sim_w, "sim_th": sim_th, "sim_v": sim_v, "sim_id": sim_id, "meas_i": i_meas[idx],
             "meas_w": w_meas[idx], "meas_th": S["theta"][idx], "meas_v": meas_v, "idx": idx}
 
 
@@ -578,7 +584,9 @@ def apply_thermal(params: ActuatorParams, thermal: dict[str, Any]):
     notes, not_sim = [], []
     flat = {}
     for f in thermal["findings"]:
-        if f["effect"] in ("thermal_parameters", "voltage_saturation", "iron_loss") and f.get("simulated"):
+        if f.get("updated_fields"):          # categorical settings (drive.voltage_limit_mode), written as found
+            flat.update(f["updated_fields"])
+        elif f["effect"] in ("thermal_parameters", "voltage_saturation", "iron_loss") and f.get("simulated"):
             for name, fld in f["fields"].items():
                 spec = SPECS[fld]
                 lo, hi = spec.range

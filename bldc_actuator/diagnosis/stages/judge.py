@@ -1,0 +1,115 @@
+"""Stage 4, judge (simulation): which of the search's findings make the simulated actuator — the node's own kernel
+— reproduce held-out data better, and which are worth a parameter at all?
+
+:func:`run`, in order: aliased forms decided by the held-out replay (:func:`..judge.arbitrate_aliases`);
+practical significance and identifiability (:func:`..significance.judge`: a parameter must move beyond the
+tolerance and be identified); leave-one-out held-out simulation of every equation-error finding
+(:func:`..judge.simulate_findings`); the thermal network by full-length thermal simulation
+(:func:`..judge.judge_thermal`); the drive's fitted voltage limit by replay (:func:`..judge.judge_voltage_limit`);
+and the drive's behaviour at the voltage limit, which only a simulation can see (:func:`..drive_modes.identify`).
+With ``options.simulation_gate`` off the simulated verdicts are reported but refuse nothing.
+"""
+
+from __future__ import annotations
+
+import time
+
+from .. import drive_modes, judge, refit, significance
+from ..candidates import SPECIAL
+from ..selection import forward_select
+from .data import Judgement, Say, Search
+
+#: simulated verdicts that keep a finding
+_KEEP = ("confirmed", "not simulated", "not checkable in simulation")
+
+
+def _refuse(verdicts: list, effect: str, v: dict, unit: str, say: Say) -> None:
+    verdicts.append(significance.Verdict(effect, "not_confirmed_in_simulation",
+                                         f"{effect}: {v['verdict']} (held-out simulated {v.get('channel') or ''} "
+                                         f"error {v['without']:.3g} -> {v['with']:.3g}{unit}, noise floor "
+                                         f"{v['noise_floor']:.2g}{unit})"))
+    say(f"5/6 judge: {verdicts[-1].message}")
+
+
+def _refit_linear(s: Search, sel):
+    ff = refit.final_fit(s.ctx, sel)
+    sel.final_fit = ff.fit
+    return ff, refit.effect_parameters(s.ctx, sel, ff, s.lib)
+
+
+def run(s: Search, options, say: Say) -> Judgement:
+    t0 = time.perf_counter()
+    ctx, lib, sel, special = s.ctx, s.lib, s.selection, dict(s.special)
+    linear = [n for n in s.names if n not in SPECIAL]
+    starts, win = s.starts_holdout, options.window_s
+    simulate = options.replay and bool(starts)
+    alias_records: list[dict] = []
+    if options.simulation_gate and simulate and sel.aliases:
+        # aliased forms: the held-out simulation decides (the simpler one when it cannot tell them apart)
+        sel, alias_records = judge.arbitrate_aliases(
+            ctx, sel, lambda out: forward_select(ctx, s.located, lib, [n for n in linear if n not in out], options.gate),
+            lib, starts, win, progress=lambda m: say(f"4/6 attribute: {m}"))
+    say(f"4/6 attribute: accepted {[a.effect for a in sel.accepted] + [f['effect'] for f in special['findings']] or 'nothing'}; "
+        f"{len(sel.not_checkable) + len(special['not_checkable'])} not checkable")
+
+    # practical significance and identifiability, before the final fit and the parameter file
+    ff = refit.final_fit(ctx, sel)
+    pars = refit.effect_parameters(ctx, sel, ff, lib)
+    claimed = dict(pars)
+    for f in special["findings"]:
+        claimed[f["effect"]] = {k: {"value": v, "sd": f["uncertainty"].get(k), "field": f["fields"].get(k)}
+                                for k, v in f["parameters"].items()}
+    experiments = {n: next(iter(c.confusable.values()), "") for n, c in lib.items() if c.confusable}
+    verdicts = significance.judge(claimed, ctx.params, tolerance=options.tolerance,
+                                  max_relative_uncertainty=options.max_relative_uncertainty, experiments=experiments)
+    dropped = {v.effect for v in verdicts}
+    if dropped:
+        if any(a.effect in dropped for a in sel.accepted):
+            sel.accepted = [a for a in sel.accepted if a.effect not in dropped]
+            ff, pars = _refit_linear(s, sel)
+        special["findings"] = [f for f in special["findings"] if f["effect"] not in dropped]
+        for v in verdicts:
+            say(f"5/6 judge: {v.message}")
+
+    # equation-error findings: held-out simulated error with and without each (leave one out)
+    sim = judge.simulate_findings(ctx, sel, pars, lib, starts, win, tolerance=options.tolerance) if simulate else {}
+    refused = {e for e, v in sim.items() if v["verdict"] not in _KEEP}
+    if options.simulation_gate and refused:
+        for e in sorted(refused):
+            _refuse(verdicts, e, sim[e], "", say)
+        sel.accepted = [a for a in sel.accepted if a.effect not in refused]
+        ff, pars = _refit_linear(s, sel)
+    params_linear, notes, not_sim = refit.updated_params(ctx, sel, pars, lib)
+
+    # thermal network: full-length thermal simulation of the model with the linear findings (leave one out)
+    thermal = judge.judge_thermal(ctx, params_linear, special) if special["findings"] else {}
+    sim.update(thermal)
+    refused = {e for e, v in thermal.items() if v["verdict"] != "confirmed"}
+    if options.simulation_gate and refused:
+        for e in sorted(refused):
+            _refuse(verdicts, e, thermal[e], " K", say)
+        special["findings"] = [f for f in special["findings"] if f["effect"] not in refused]
+
+    # the drive's fitted voltage limit: held-out windows replayed with it and with the nominal one
+    vs = next((f for f in special["findings"] if f["effect"] == "voltage_saturation"), None)
+    if vs is not None and options.replay:
+        v = judge.judge_voltage_limit(ctx, refit.apply_thermal(params_linear, {"findings": [vs]})[0], vs, starts,
+                                      win, tolerance=options.tolerance)
+        sim["voltage_saturation"] = v
+        if options.simulation_gate and v["verdict"] not in ("confirmed", "not checkable in simulation"):
+            _refuse(verdicts, "voltage_saturation", v, " A", say)
+            special["findings"] = [f for f in special["findings"] if f is not vs]
+
+    # the drive's behaviour at the voltage limit: only the simulation can see it
+    if options.replay:
+        with_special = refit.apply_thermal(params_linear, special)[0] if special["findings"] else params_linear
+        dm = drive_modes.identify(ctx, with_special, win, wanted="voltage_limit_mode" in s.names, z=2.0,
+                                  tolerance=options.tolerance)
+        for k in ("findings", "rejected", "not_checkable"):
+            special[k] = special[k] + dm[k]
+        if dm["simulation"] is not None:
+            sim["voltage_limit_mode"] = dm["simulation"]
+    return Judgement(selection=sel, final=ff, parameters=pars, special=special, verdicts=verdicts, simulation=sim,
+                     alias_simulation=alias_records, params_linear=params_linear, notes=notes,
+                     not_simulated=not_sim, timing={"judge": time.perf_counter() - t0})
+
