@@ -170,15 +170,13 @@ def _corr(a: np.ndarray, b: np.ndarray) -> float:
     return float(abs(a @ b) / (na * nb))
 
 
-def forward_select(ctx: Context, loc: dict, lib: dict[str, Candidate], names: list[str], gate: GateConfig,
-                   progress: Callable[[str], None] | None = None) -> SelectionResult:
-    say = progress or (lambda s: None)
+def _pool(ctx: Context, loc: dict, lib: dict[str, Candidate], names: list[str]):
+    """Each candidate's checkable forms; the ones this recording cannot check, and those refused up front."""
     not_checkable: list[dict] = []
     early_rejected: list[dict] = []
     pool: dict[str, list[Variant]] = {}
     for name in names:
-        cand = lib[name]
-        variants, nc = checkable(ctx, cand, loc)
+        variants, nc = checkable(ctx, lib[name], loc)
         if nc and nc.get("rejected"):
             why = ("no multiple of 2 x pole_pairs stands out of the residual's angle-order spectrum (cogging "
                    "order = lcm(slots, 2p); give effects.cogging_order to test a known order)"
@@ -188,22 +186,122 @@ def forward_select(ctx: Context, loc: dict, lib: dict[str, Candidate], names: li
             not_checkable.append(nc)
         elif variants:
             pool[name] = variants
-    cols: dict[str, dict[str, np.ndarray]] = {}
+    return pool, not_checkable, early_rejected
 
-    def ensure(v: Variant):
+
+def _gate(ctx: Context, cand: Candidate, best: Evaluation, base: Fit, weights, gate: GateConfig) -> Evaluation:
+    """The gates a candidate's best form must pass: plausible values, ΔBIC on training data, a significant
+    held-out improvement that worsens no equation. Sets ``best.passed`` and ``best.reason``."""
+    best.heldout = heldout_comparison(ctx, base, best.fit, weights)
+    ho = best.heldout
+    idx = [best.fit.keys.index(k) for k in best.added]
+    why = implausible(cand, best.fit.beta[idx], best.fit.cov[np.ix_(idx, idx)], best.added, best.variant, ctx)
+    if why:
+        best.reason = why
+    elif best.dbic <= gate.bic_threshold:
+        best.reason = f"ΔBIC {best.dbic:.1f} <= {gate.bic_threshold:g} (not supported by the training data)"
+    elif not ho.get("available"):
+        best.reason = "no held-out data for this equation"
+    elif ho["rel"] <= gate.min_heldout_gain:
+        best.reason = (f"held-out error {'worse' if ho['rel'] < 0 else 'not better'} "
+                       f"({-100 * ho['rel']:+.2f}% RMS) although ΔBIC {best.dbic:.1f}")
+    elif any(a1 > a0 * (1.0 + gate.max_equation_worsening) for a0, a1 in ho["per_eq"].values()):
+        worse = [eq for eq, (a0, a1) in ho["per_eq"].items() if a1 > a0 * (1.0 + gate.max_equation_worsening)]
+        best.reason = (f"makes the {', '.join(worse)} equation worse on held-out data (one physical "
+                       f"parameter must fit every equation it enters)")
+    elif ho["t"] <= gate.min_heldout_t:
+        best.reason = (f"held-out improvement {100 * ho['rel']:.2f}% not significant "
+                       f"(t = {ho['t']:.1f} <= {gate.min_heldout_t:g})")
+    else:
+        best.passed = True
+        best.reason = f"passed: ΔBIC {best.dbic:.1f}, held-out -{100 * ho['rel']:.2f}% RMS (t = {ho['t']:.1f})"
+    return best
+
+
+def _best_form(ctx, name, variants, accepted, used_labels, keys, cols, weights, iterating, base,
+               gate: GateConfig) -> Evaluation | None:
+    """A candidate's form for this round, chosen on training data: best ΔBIC, but the simplest among those
+    within the BIC threshold of the best (a harmonic of a sub-order must not beat the order itself)."""
+    done = [a for a in accepted if a.effect == name]
+    tried: list[Evaluation] = []
+    for v in variants:
+        if done and not (v.additive and (name, v.label) not in used_labels):
+            continue
+        added = [k for k in v.keys if k not in keys]
+        if not added:
+            continue
+        its = dict(iterating)
+        if v.iterate is not None:
+            its[v.keys[0]] = v
+        f = fit_model(ctx, cols, keys + added, weights, its)
+        tried.append(Evaluation(name, v, added, f, delta_bic(base, f), {}, False, ""))
+    if not tried:
+        return None
+    top = max(e.dbic for e in tried)
+    return min((e for e in tried if e.dbic >= top - gate.bic_threshold), key=lambda e: (len(e.added), -e.dbic))
+
+
+def _aliases_of(ctx, win: Evaluation, passing: list[Evaluation], cols, weights, gate: GateConfig) -> list[dict]:
+    """Other passing candidates that explain the same residual component as the round's winner."""
+    out = []
+    cw = _contribution(ctx, win.fit, cols, win.added, weights)
+    for e in passing:
+        if e is win or set(e.variant.keys) >= set(win.variant.keys) or set(e.variant.keys) <= set(win.variant.keys):
+            continue     # nested forms (e.g. Coulomb inside asymmetric friction) are not alternatives
+        c = _corr(cw, _contribution(ctx, e.fit, cols, e.added, weights))
+        if c >= gate.alias_corr and e.heldout["rel"] >= 0.5 * win.heldout["rel"]:
+            out.append({"effects": [win.effect, e.effect], "correlation": round(c, 3), "chosen": win.effect,
+                        "heldout_gain": {win.effect: round(win.heldout["rel"], 4), e.effect: round(e.heldout["rel"], 4)}})
+    return out
+
+
+def _rejected(last_eval: dict[str, Evaluation], accepted, aliases, early_rejected, removed) -> list[dict]:
+    out = []
+    acc_names = {a.effect for a in accepted}
+    for name, e in last_eval.items():
+        if name in acc_names:
+            continue
+        reason = e.reason
+        al = [x for x in aliases if e.effect in x["effects"] and x["chosen"] != e.effect]
+        if al:
+            reason = f"explains the same residual as {al[0]['chosen']} (aliased); {reason}"
+        out.append({"effect": name, "form": e.variant.label, "reason": reason,
+                    "delta_bic": round(e.dbic, 2), "heldout_gain": round(e.heldout.get("rel", 0.0), 5),
+                    "heldout_t": round(e.heldout.get("t", 0.0), 2)})
+    return out + early_rejected + [{"effect": r["effect"], "form": r["form"], "reason": r["reason"]} for r in removed]
+
+
+def _reselect_without(ctx, loc, lib, names, gate, progress, a: Accepted, why: str, aliases) -> SelectionResult:
+    """Selection again without ``a``, implausible in the joint fit: the others were chosen in its company."""
+    again = forward_select(ctx, loc, lib, [n for n in names if n != a.effect], gate, progress)
+    again.rejected.append({"effect": a.effect, "form": a.variant.label,
+                           "reason": f"{why} in the joint fit with the effects accepted after it "
+                                     f"(aliased with them in this data)"})
+    again.aliases.extend(x for x in aliases if a.effect in x["effects"] and x not in again.aliases)
+    kept = {acc.effect for acc in again.accepted}
+    for x in again.aliases:
+        if x.get("chosen") == a.effect:
+            x["chosen"] = next((e for e in x["effects"] if e != a.effect and e in kept), None)
+    return again
+
+
+def forward_select(ctx: Context, loc: dict, lib: dict[str, Candidate], names: list[str], gate: GateConfig,
+                   progress: Callable[[str], None] | None = None) -> SelectionResult:
+    """Forward selection: each round every candidate's best form is gated (:func:`_gate`), the passing one with
+    the largest held-out gain (the simplest among near-ties) is accepted, others explaining the same residual
+    are recorded as its aliases; then a backward check removes what the others made redundant or implausible."""
+    say = progress or (lambda s: None)
+    pool, not_checkable, early_rejected = _pool(ctx, loc, lib, names)
+    cols: dict[str, dict[str, np.ndarray]] = {}
+    for v in (v for vs in pool.values() for v in vs):
         for k, b in v.columns.items():
             if k not in cols:
                 cols[k] = ctx.column(k, b)
-
-    for vs in pool.values():
-        for v in vs:
-            ensure(v)
     for k, b in ctx.nuisance.items():
         cols[k] = ctx.column(k, b)
     keys: list[str] = list(ctx.nuisance)
     iterating: dict[str, Variant] = {}
-    w0 = {eq: 1.0 for eq in ctx.blocks}
-    base = fit_columns(ctx, cols, keys, w0)
+    base = fit_columns(ctx, cols, keys, {eq: 1.0 for eq in ctx.blocks})
     weights = _weights(ctx, base)
     base = fit_columns(ctx, cols, keys, weights)
     nominal = base
@@ -215,51 +313,10 @@ def forward_select(ctx: Context, loc: dict, lib: dict[str, Candidate], names: li
     for rnd in range(gate.max_rounds):
         evals: list[Evaluation] = []
         for name, variants in pool.items():
-            done = [a for a in accepted if a.effect == name]
-            tried: list[Evaluation] = []
-            for v in variants:
-                if done and not (v.additive and (name, v.label) not in used_labels):
-                    continue
-                added = [k for k in v.keys if k not in keys]
-                if not added:
-                    continue
-                its = dict(iterating)
-                if v.iterate is not None:
-                    its[v.keys[0]] = v
-                f = fit_model(ctx, cols, keys + added, weights, its)
-                tried.append(Evaluation(name, v, added, f, delta_bic(base, f), {}, False, ""))
-            if not tried:
+            best = _best_form(ctx, name, variants, accepted, used_labels, keys, cols, weights, iterating, base, gate)
+            if best is None:
                 continue
-            # the form is chosen on training data: best ΔBIC, but the simplest among those within the
-            # BIC threshold of the best (a harmonic of a sub-order must not beat the order itself)
-            top = max(e.dbic for e in tried)
-            best = min((e for e in tried if e.dbic >= top - gate.bic_threshold),
-                       key=lambda e: (len(e.added), -e.dbic))
-            best.heldout = heldout_comparison(ctx, base, best.fit, weights)
-            ho = best.heldout
-            idx = [best.fit.keys.index(k) for k in best.added]
-            why = implausible(lib[name], best.fit.beta[idx], best.fit.cov[np.ix_(idx, idx)], best.added,
-                              best.variant, ctx)
-            if why:
-                best.reason = why
-            elif best.dbic <= gate.bic_threshold:
-                best.reason = f"ΔBIC {best.dbic:.1f} <= {gate.bic_threshold:g} (not supported by the training data)"
-            elif not ho.get("available"):
-                best.reason = "no held-out data for this equation"
-            elif ho["rel"] <= gate.min_heldout_gain:
-                best.reason = (f"held-out error {'worse' if ho['rel'] < 0 else 'not better'} "
-                               f"({-100 * ho['rel']:+.2f}% RMS) although ΔBIC {best.dbic:.1f}")
-            elif any(a1 > a0 * (1.0 + gate.max_equation_worsening) for a0, a1 in ho["per_eq"].values()):
-                worse = [eq for eq, (a0, a1) in ho["per_eq"].items() if a1 > a0 * (1.0 + gate.max_equation_worsening)]
-                best.reason = (f"makes the {', '.join(worse)} equation worse on held-out data (one physical "
-                               f"parameter must fit every equation it enters)")
-            elif ho["t"] <= gate.min_heldout_t:
-                best.reason = (f"held-out improvement {100 * ho['rel']:.2f}% not significant "
-                               f"(t = {ho['t']:.1f} <= {gate.min_heldout_t:g})")
-            else:
-                best.passed = True
-                best.reason = f"passed: ΔBIC {best.dbic:.1f}, held-out -{100 * ho['rel']:.2f}% RMS (t = {ho['t']:.1f})"
-            evals.append(best)
+            evals.append(_gate(ctx, lib[name], best, base, weights, gate))
             last_eval[name] = best
         rounds.append([e.summary() for e in sorted(evals, key=lambda e: -e.dbic)])
         passing = [e for e in evals if e.passed]
@@ -270,25 +327,13 @@ def forward_select(ctx: Context, loc: dict, lib: dict[str, Candidate], names: li
         near = [e for e in passing if e.heldout["rel"] >= top - max(0.002, 0.05 * top)]
         win = min(near, key=lambda e: (len(e.added), -e.dbic))
         say(f"round {rnd + 1}: accepted {win.effect} ({win.variant.label}); {win.reason}")
-        # aliases: other passing candidates explaining the same residual component
-        cw = _contribution(ctx, win.fit, cols, win.added, weights)
-        for e in passing:
-            if e is win or set(e.variant.keys) >= set(win.variant.keys) or set(e.variant.keys) <= set(win.variant.keys):
-                continue     # nested forms (e.g. Coulomb inside asymmetric friction) are not alternatives
-            ce = _contribution(ctx, e.fit, cols, e.added, weights)
-            c = _corr(cw, ce)
-            if c >= gate.alias_corr and e.heldout["rel"] >= 0.5 * win.heldout["rel"]:
-                aliases.append({"effects": [win.effect, e.effect], "correlation": round(c, 3),
-                                "chosen": win.effect,
-                                "heldout_gain": {win.effect: round(win.heldout["rel"], 4),
-                                                 e.effect: round(e.heldout["rel"], 4)}})
+        aliases += _aliases_of(ctx, win, passing, cols, weights, gate)
         accepted.append(Accepted(win.effect, win.variant, win.added, rnd + 1, win.dbic, win.heldout))
         used_labels.add((win.effect, win.variant.label))
         if win.variant.iterate is not None:
             iterating[win.variant.keys[0]] = win.variant
         keys = keys + win.added
-        base = win.fit
-        weights = _weights(ctx, base)
+        weights = _weights(ctx, win.fit)
         base = fit_model(ctx, cols, keys, weights, iterating)
         last_eval.pop(win.effect, None)
     # backward check: every accepted effect must still earn its place given the others, and its parameters
@@ -301,18 +346,9 @@ def forward_select(ctx: Context, loc: dict, lib: dict[str, Candidate], names: li
         for a in list(accepted):
             idx = [base.keys.index(k) for k in a.added]
             why = implausible(lib[a.effect], base.beta[idx], base.cov[np.ix_(idx, idx)], a.added, a.variant, ctx)
-            if why:   # select again without it: the others were chosen in its company
+            if why:
                 say(f"backward check: {a.effect} is implausible in the joint fit ({why}); selecting again without it")
-                again = forward_select(ctx, loc, lib, [n for n in names if n != a.effect], gate, progress)
-                again.rejected.append({"effect": a.effect, "form": a.variant.label,
-                                       "reason": f"{why} in the joint fit with the effects accepted after it "
-                                                 f"(aliased with them in this data)"})
-                again.aliases.extend(x for x in aliases if a.effect in x["effects"] and x not in again.aliases)
-                kept = {acc.effect for acc in again.accepted}
-                for x in again.aliases:
-                    if x.get("chosen") == a.effect:
-                        x["chosen"] = next((e for e in x["effects"] if e != a.effect and e in kept), None)
-                return again
+                return _reselect_without(ctx, loc, lib, names, gate, progress, a, why, aliases)
             if len(accepted) < 2:
                 continue
             others = [k for k in keys if k not in a.added]
@@ -329,20 +365,6 @@ def forward_select(ctx: Context, loc: dict, lib: dict[str, Candidate], names: li
                 say(f"backward check: removed {a.effect}")
                 changed = True
                 break
-    rejected = []
-    acc_names = {a.effect for a in accepted}
-    for name, e in last_eval.items():
-        if name in acc_names:
-            continue
-        reason = e.reason
-        al = [x for x in aliases if e.effect in x["effects"] and x["chosen"] != e.effect]
-        if al:
-            reason = f"explains the same residual as {al[0]['chosen']} (aliased); {reason}"
-        rejected.append({"effect": name, "form": e.variant.label, "reason": reason,
-                         "delta_bic": round(e.dbic, 2), "heldout_gain": round(e.heldout.get("rel", 0.0), 5),
-                         "heldout_t": round(e.heldout.get("t", 0.0), 2)})
-    rejected += early_rejected
-    for r in removed:
-        rejected.append({"effect": r["effect"], "form": r["form"], "reason": r["reason"]})
-    return SelectionResult(accepted, base, nominal, cols, weights, rejected, aliases, not_checkable, rounds, removed,
-                           iterating)
+    return SelectionResult(accepted, base, nominal, cols, weights,
+                           _rejected(last_eval, accepted, aliases, early_rejected, removed), aliases, not_checkable,
+                           rounds, removed, iterating)
