@@ -196,6 +196,26 @@ def sensor_offsets_for_q_ripple(c: float, s: float) -> tuple[float, float]:
     return float(o_a), float(o_b)
 
 
+def sensor_gains_for_q_ripple(c: float, s: float) -> tuple[float, float, float]:
+    """Phase-a/b current-sensor gain errors (gain = 1 + δ) for a fitted order-2p ripple of the measured q current
+    per ampere, ``c cos 2θ_e + s sin 2θ_e``. Returns ``(δ_a, δ_b, share)``.
+
+    With phase c reconstructed from a and b (as the drive does), a gain error's 2θ_e part is fixed in phase and
+    depends on the difference δ_a - δ_b only: the common part is a constant scale of the measured current, one
+    with a torque-constant error, and is left at zero here (δ_a = -δ_b). ``share`` is the fraction of the
+    fitted ripple's power a gain mismatch can explain (its projection on that one direction; the rest is another
+    order-2p source). The 2θ_e components come from :func:`bldc_actuator.frames.abc_to_dq` of the mis-scaled
+    phase currents."""
+    th = np.linspace(0.0, 2.0 * math.pi, 64, endpoint=False)
+    a, b, _ = frames.dq_to_abc(0.0, 1.0, th)
+    e_q = frames.abc_to_dq(0.5 * a, -0.5 * b, -(0.5 * a - 0.5 * b), th)[1]    # δ_a - δ_b = 1
+    u = np.array([np.mean(e_q * np.cos(2 * th)), np.mean(e_q * np.sin(2 * th))]) * 2.0
+    y = np.array([c, s])
+    diff = float(y @ u / (u @ u))
+    share = float((diff * diff * (u @ u)) / (y @ y)) if y @ y > 0 else 0.0
+    return 0.5 * diff, -0.5 * diff, share
+
+
 def updated_params(ctx: Context, sel: SelectionResult, pars: dict[str, dict], lib: dict[str, Candidate]):
     """New :class:`ActuatorParams` with the accepted effects switched on; returns (params, notes, not_simulated)."""
     flat = ctx.params.to_flat()
@@ -211,6 +231,15 @@ def updated_params(ctx: Context, sel: SelectionResult, pars: dict[str, dict], li
             flat["drive.current_sensor_offset_b"] = flat["drive.current_sensor_offset_b"] + o_b
             notes.append(f"electrical_angle_ripple (current-sensor offsets) written as drive.current_sensor_offset_a/_b "
                          f"+= {o_a:.4g} / {o_b:.4g} A: the simulated controller acts on the offset measurement")
+            continue
+        if a.effect == "electrical_angle_ripple" and a.variant.hyper.get("kind") == "gain":
+            d_a, d_b, share = sensor_gains_for_q_ripple(p["_cos"]["value"], p["_sin"]["value"])
+            flat["drive.current_sensor_gain_a"] = flat["drive.current_sensor_gain_a"] + d_a
+            flat["drive.current_sensor_gain_b"] = flat["drive.current_sensor_gain_b"] + d_b
+            notes.append(f"electrical_angle_ripple (current-sensor gain mismatch) written as "
+                         f"drive.current_sensor_gain_a/_b += {d_a:.4g} / {d_b:.4g} (their difference; a common "
+                         f"scale of both is a torque-constant error): the simulated controller acts on the "
+                         f"mis-scaled measurement; a gain mismatch explains {100 * share:.0f} % of the fitted ripple")
             continue
         if a.effect == "electrical_angle_ripple":
             if a.variant.hyper.get("kind") == "torque" and "cogging_torque" not in accepted \
