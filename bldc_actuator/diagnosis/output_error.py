@@ -34,16 +34,31 @@ MAX_TRAIN_WINDOWS = 60
 
 
 def changed_fields(nominal: ActuatorParams, updated: ActuatorParams) -> list[str]:
-    """Scalar numeric parameter fields the accepted effects changed."""
+    """Numeric parameter fields the accepted effects changed; an element of a series field (the cogging
+    harmonics) as ``field[k]``."""
     a, b = nominal.to_flat(), updated.to_flat()
     out = []
     for k, v in b.items():
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or k.startswith(("thermal.", "node.")):
+        if k.startswith(("thermal.", "node.")) or k == "effects.cogging_order" or v == a.get(k):
             continue
-        if k in ("effects.cogging_order",) or v == a.get(k):
-            continue
-        out.append(k)
+        if isinstance(v, tuple):
+            out += [f"{k}[{i}]" for i, x in enumerate(v) if isinstance(x, (int, float))]
+        elif isinstance(v, (int, float)) and not isinstance(v, bool):
+            out.append(k)
     return out
+
+
+def _split(field: str) -> tuple[str, int | None]:
+    """``"effects.cogging_cos[1]"`` -> ``("effects.cogging_cos", 1)``; a scalar field -> ``(field, None)``."""
+    if field.endswith("]"):
+        name, idx = field[:-1].split("[")
+        return name, int(idx)
+    return field, None
+
+
+def _flat_value(flat: dict, field: str) -> float:
+    name, i = _split(field)
+    return float(flat[name][i] if i is not None else flat[name])
 
 
 _CHANNELS = (("velocity_rms", "sim_w", "meas_w"), ("current_rms", "sim_i", "meas_i"), ("voltage_rms", "sim_v", "meas_v"))
@@ -83,8 +98,8 @@ def refit(ctx, nominal: ActuatorParams, updated: ActuatorParams, starts_train: l
     fields = changed_fields(nominal, updated)
     fields += [f for f in CORE_FIELDS if f not in fields]
     flat0 = updated.to_flat()
-    x_kind = {f: "log" if flat0[f] > 0 and SPECS[f].range[0] >= 0 else "lin" for f in fields}
-    v0 = np.array([float(flat0[f]) for f in fields])
+    x_kind = {f: "log" if _split(f)[1] is None and flat0[f] > 0 and SPECS[f].range[0] >= 0 else "lin" for f in fields}
+    v0 = np.array([_flat_value(flat0, f) for f in fields])
     lin_scale = np.where(np.abs(v0) > 0, np.abs(v0), 1e-3)
 
     def values(x):
@@ -93,10 +108,16 @@ def refit(ctx, nominal: ActuatorParams, updated: ActuatorParams, starts_train: l
 
     def params_at(x) -> ActuatorParams | None:
         vals = values(x)
-        upd = {}
+        upd: dict = {}
         for f, v in zip(fields, vals):
-            lo, hi = SPECS[f].range
-            upd[f] = min(max(float(v), lo), hi)
+            name, i = _split(f)
+            if i is None:
+                lo, hi = SPECS[name].range
+                upd[name] = min(max(float(v), lo), hi)
+            else:       # one harmonic of a series: the others as they are
+                series = list(upd.get(name, flat0[name]))
+                series[i] = float(v)
+                upd[name] = tuple(series)
         try:
             return updated.replace(**upd)
         except Exception:  # noqa: BLE001 - a step outside the schema: the caller treats it as a large residual
