@@ -68,9 +68,15 @@ def steady_speed_analytic(params: ActuatorParams, T_winding: float, T_housing: f
 
     R at the winding temperature, K at the housing (magnet) temperature. For a given w the last line is a
     quadratic in i_d (small root); |v(w)| = V_max is solved for w by bracketing. ``i_q_ref`` defaults to the
-    current limit (a command the drive cannot meet: the speed is voltage-limited).
+    current limit (a command the drive cannot meet: the speed is voltage-limited). The parallel condition is the
+    proportional limiter's (``drive.voltage_limit_mode: proportional``, every preset's); the other modes' steady
+    states are solved in test/test_voltage_limit.py, and asking for one here is an error naming the field.
     """
     from scipy.optimize import brentq
+
+    if params.drive.voltage_limit_mode != "proportional":
+        raise ValueError(f"drive.voltage_limit_mode: steady_speed_analytic solves the proportional limiter only, "
+                         f"got {params.drive.voltage_limit_mode!r}")
 
     m, e = params.motor, params.effects
     R = effects.resistance_at(m.phase_resistance, T_winding, m.reference_temperature,
@@ -321,8 +327,10 @@ def summarize_demo(rec, profile: Profile, wall: float, lock_step: bool, time_fac
     v0, ripple0, m0 = window(STEADY_NO_LOAD)
     v1, ripple1, m1 = window(STEADY_LOAD)
     i_ref = profile.meta["tau_a"] / (params.motor.torque_constant_q * params.gear.gear_ratio)
-    est0, _ = steady_speed_analytic(params, float(s["T_w"][m0][-1]), float(s["T_h"][m0][-1]), 0.0, i_ref)
-    est1, _ = steady_speed_analytic(params, float(s["T_w"][m1][-1]), float(s["T_h"][m1][-1]), tau_load, i_ref)
+    est0 = est1 = float("nan")     # the analytic check solves the proportional limiter (every preset's)
+    if params.drive.voltage_limit_mode == "proportional":
+        est0, _ = steady_speed_analytic(params, float(s["T_w"][m0][-1]), float(s["T_h"][m0][-1]), 0.0, i_ref)
+        est1, _ = steady_speed_analytic(params, float(s["T_w"][m1][-1]), float(s["T_h"][m1][-1]), tau_load, i_ref)
     dt = float(np.median(np.diff(s["t_q"]))) if len(s["t_q"]) > 1 else 0.0
 
     def saturated(w):

@@ -109,3 +109,13 @@ def test_field_weakening_raises_the_top_speed_within_the_current_limit():
 def test_mode_is_validated():
     with pytest.raises(ParameterError, match="voltage_limit_mode"):
         _params("sideways")
+
+
+def test_demo_analytic_steady_state_is_the_proportional_limiters_and_says_so():
+    from bldc_actuator.demo import steady_speed_analytic
+
+    w, _ = steady_speed_analytic(_params("proportional"), 25.0, 25.0, 0.0, CMD)
+    a, out = _run(_params("proportional"), duration=0.5)
+    assert w == pytest.approx(out[-1, 0] / a.params.gear.gear_ratio, rel=2e-3)
+    with pytest.raises(ValueError, match="drive.voltage_limit_mode"):
+        steady_speed_analytic(_params("q_priority"), 25.0, 25.0, 0.0, CMD)
