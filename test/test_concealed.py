@@ -87,6 +87,65 @@ def test_c_kernel_matches_numpy_reference():
             np.testing.assert_allclose(a[key], b[key], rtol=1e-7, atol=1e-8, err_msg=key)
 
 
+@pytest.mark.skipif(T._c_library() is None, reason="no C compiler: only the numpy kernel exists")
+def test_c_kernel_matches_numpy_reference_for_other_drives():
+    """Drives without decoupling, with conditional-integration anti-windup, with d- or q-priority limiting (all
+    at the voltage limit, where they differ): both kernels agree."""
+    drives = [T.Drive(decoupling=False, anti_windup="clamp", kp_out=0.0, kd_out=2.0),
+              T.Drive(voltage_limit="q_priority", kp_out=0.0, kd_out=2.0),
+              T.Drive(voltage_limit="d_priority", anti_windup="clamp", kp_out=0.0, kd_out=2.0)]
+    specs = [T.TruthSpec(drive=d, seed=5 + k) for k, d in enumerate(drives)]
+    ref = ramp_reference(40.0, 0.6, accel_time=0.2)
+    rc = T.simulate(specs, [ref] * 3, backend="c")
+    rn = T.simulate(specs, [ref] * 3, backend="numpy")
+    for a, b in zip(rc, rn):
+        for key in a:   # q-priority at the circle: v_d = sqrt(V^2 - v_q^2) of a near-zero difference magnifies
+            np.testing.assert_allclose(a[key], b[key], rtol=1e-6, atol=1e-5, err_msg=key)   # rounding to ~1e-6
+
+
+def _top_speed(drive: T.Drive) -> tuple[dict, slice]:
+    spec = ideal(T.TruthSpec(drive=replace(drive, kp_out=0.0, kd_out=2.0), seed=1))
+    r, = T.simulate([spec], [ramp_reference(40.0, 1.5, accel_time=0.3)])
+    return r, slice(1200, 1500)
+
+
+def test_voltage_limit_modes_reach_the_steady_state_of_the_dq_equations():
+    """Asked for far more than the top speed, every mode settles on the circle (|v| = V_lim) in a steady state
+    of the d/q equations v_d = R i_d - p ω L i_q, v_q = R i_q + p ω L i_d + K ω; they differ in how: q-priority
+    gives v_q the whole circle, so v_d = 0 and i_d = p ω L i_q / R > 0, which costs speed against proportional
+    scaling; d-priority serves v_d first and holds the d current at its 0 reference."""
+    out = {}
+    for mode in ("proportional", "q_priority", "d_priority"):
+        r, sl = _top_speed(T.Drive(voltage_limit=mode))
+        P = T.Plant()
+        v_lim = np.mean(T.Drive().modulation_limit * r["true_bus_voltage"][sl] / math.sqrt(2.0))
+        w, i_q, i_d, v_q, v_d = (np.mean(r[k][sl]) for k in ("true_omega", "true_i_q", "true_i_d", "voltage_q",
+                                                             "true_v_d"))
+        assert math.hypot(v_d, v_q) == pytest.approx(v_lim, rel=0.01)
+        assert v_d == pytest.approx(P.R_ref * i_d - P.pole_pairs * w * P.L * i_q, abs=0.01 * v_lim)
+        assert v_q == pytest.approx(P.R_ref * i_q + P.pole_pairs * w * P.L * i_d + P.K * w, abs=0.01 * v_lim)
+        out[mode] = (w, i_d, v_d, v_lim)
+    w_q, i_d_q, v_d_q, v_lim = out["q_priority"]
+    assert abs(v_d_q) < 1e-3 * v_lim and i_d_q > 0.5
+    assert w_q < 0.995 * out["proportional"][0]
+    assert out["d_priority"][1] == pytest.approx(0.0, abs=0.05)    # v_d first: the d current is held at 0
+
+
+def test_decoupling_and_anti_windup_matter_only_where_they_should():
+    """Below the limit, a drive without decoupling tracks the same steady current (the integrator absorbs the
+    back-EMF) but lags in transients; clamping and back-calculation are identical until the output saturates."""
+    ref = ex.reference(ex.sequence(ex.gait(2.0, 4), lead_in=0.1, blend=0.3))
+    base, nodec, clamp = T.simulate([ideal(T.TruthSpec(drive=d, seed=2)) for d in
+                                     (T.Drive(), T.Drive(decoupling=False), T.Drive(anti_windup="clamp"))],
+                                    [ref] * 3)
+    err = {k: np.sqrt(np.mean((r["true_i_q"] - r["current_command"]) ** 2)) for k, r in
+           (("base", base), ("nodec", nodec))}
+    assert err["nodec"] > 1.2 * err["base"]
+    assert np.max(np.abs(clamp["true_i_q"] - base["true_i_q"])) < 1e-9      # never saturated here
+    (r_bc, sl), (r_cl, _) = _top_speed(T.Drive()), _top_speed(T.Drive(anti_windup="clamp"))
+    assert np.max(np.abs(r_bc["true_i_q"][:1500] - r_cl["true_i_q"][:1500])) > 1e-3   # they differ at the limit
+
+
 @pytest.fixture(scope="module")
 def spin():
     """Ideal sensors, constant output speed 3 rad/s (27 rad/s motor), Coulomb + viscous friction."""

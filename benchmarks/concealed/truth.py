@@ -132,6 +132,14 @@ class Drive:
     gravity_ff_out: float = 0.0          #: known gravity feed-forward amplitude [N·m, output]
     gravity_ff_phase: float = 0.0
     coulomb_ff: float = 0.0              #: known Coulomb friction feed-forward [N·m, motor side]
+    decoupling: bool = True              #: PI output + ω·L cross-coupling and back-EMF feed-forward (speed estimate)
+    #: "back_calculation": the integrator takes the limiter's cut back (z += Ki T e + (v - u));
+    #: "clamp": conditional integration, an axis's integrator frozen while its output is cut and the error
+    #: pushes further into the cut
+    anti_windup: str = "back_calculation"
+    #: the PI output (u_d, u_q) onto the circle |v| <= V_lim: "proportional" scales the whole vector,
+    #: "d_priority" keeps u_d (clamped) and gives v_q the rest, "q_priority" keeps u_q and gives v_d the rest
+    voltage_limit: str = "proportional"
 
 
 @dataclass(frozen=True)
@@ -191,11 +199,13 @@ PARAM_NAMES = (
     "C_w", "C_h", "R_wh", "R_ha", "T_amb", "T_w0", "T_h0", "V_s", "R_s",
     # drive
     "f_cl", "sub", "ticks_per_pos", "Kp_i", "Ki_i", "L_nom", "K_nom", "m_lim", "I_lim", "k1_pll", "k2_pll",
-    "kp_out", "kd_out", "N_nom", "J_ff_out", "ff_const", "ff_g", "ff_gph", "ff_c",
+    "kp_out", "kd_out", "N_nom", "J_ff_out", "ff_const", "ff_g", "ff_gph", "ff_c", "dec", "aw", "vlm",
     # sensors
     "sig_i", "off_a", "off_b", "g_a", "g_b", "q_enc",
 )
 N_COGGING_HARMONICS = 3
+ANTI_WINDUP = ("back_calculation", "clamp")
+VOLTAGE_LIMITS = ("proportional", "d_priority", "q_priority")
 
 
 def param_vector(spec: TruthSpec) -> np.ndarray:
@@ -210,6 +220,9 @@ def param_vector(spec: TruthSpec) -> np.ndarray:
     if abs(ticks - round(ticks)) > 1e-9:
         raise ValueError("drive.current_loop_rate must be a multiple of drive.position_rate")
     w_c, w_pll = TWO_PI * D.bandwidth, TWO_PI * D.pll_bandwidth
+    if D.anti_windup not in ANTI_WINDUP or D.voltage_limit not in VOLTAGE_LIMITS:
+        raise ValueError(f"drive.anti_windup: one of {ANTI_WINDUP}, drive.voltage_limit: one of {VOLTAGE_LIMITS}; "
+                         f"got {D.anti_windup!r}, {D.voltage_limit!r}")
     on = 1.0 if S.enabled else 0.0
     values = dict(
         p=P.pole_pairs, R_ref=P.R_ref, L=P.L, K0=P.K, J=P.J, b=P.b, N=P.gear, T_ref=P.T_ref, alpha=P.alpha_cu,
@@ -224,7 +237,8 @@ def param_vector(spec: TruthSpec) -> np.ndarray:
         m_lim=D.modulation_limit / math.sqrt(2.0), I_lim=D.current_limit,
         k1_pll=2.0 * w_pll, k2_pll=w_pll ** 2, kp_out=D.kp_out, kd_out=D.kd_out, N_nom=D.N_nom,
         J_ff_out=D.J_ff * D.N_nom ** 2, ff_const=D.load_const_ff_out, ff_g=D.gravity_ff_out,
-        ff_gph=D.gravity_ff_phase, ff_c=D.coulomb_ff * D.N_nom,
+        ff_gph=D.gravity_ff_phase, ff_c=D.coulomb_ff * D.N_nom, dec=1.0 if D.decoupling else 0.0,
+        aw=float(ANTI_WINDUP.index(D.anti_windup)), vlm=float(VOLTAGE_LIMITS.index(D.voltage_limit)),
         sig_i=S.current_noise * on, off_a=S.offset_a, off_b=S.offset_b, g_a=S.gain_a, g_b=S.gain_b,
         q_enc=TWO_PI / 2.0 ** S.encoder_bits if S.enabled else 0.0,
     )
@@ -308,13 +322,22 @@ def _kernel_numpy(par: np.ndarray, ref: np.ndarray, fast: np.ndarray, n_rec: int
             i_ref = np.clip(tau / (g["N_nom"] * g["K_nom"]), -g["I_lim"], g["I_lim"])
         V_lim = g["m_lim"] * V_bus
         e_d, e_q = -id_m, i_ref - iq_m
-        u_d = g["Kp_i"] * e_d + z_d - p * w_hat * g["L_nom"] * iq_m
-        u_q = g["Kp_i"] * e_q + z_q + p * w_hat * g["L_nom"] * id_m + g["K_nom"] * w_hat
+        u_d = g["Kp_i"] * e_d + z_d - g["dec"] * p * w_hat * g["L_nom"] * iq_m
+        u_q = g["Kp_i"] * e_q + z_q + g["dec"] * (p * w_hat * g["L_nom"] * id_m + g["K_nom"] * w_hat)
         mag = np.hypot(u_d, u_q)
         sc = np.where(mag > V_lim, V_lim / np.maximum(mag, 1e-12), 1.0)
-        v_d, v_q = u_d * sc, u_q * sc
-        z_d = z_d + g["Ki_i"] * T * e_d + (v_d - u_d)
-        z_q = z_q + g["Ki_i"] * T * e_q + (v_q - u_q)
+        vd1 = np.clip(u_d, -V_lim, V_lim)                                     # d first
+        vq1 = np.clip(u_q, -np.sqrt(np.maximum(V_lim ** 2 - vd1 ** 2, 0.0)), np.sqrt(np.maximum(V_lim ** 2 - vd1 ** 2, 0.0)))
+        vq2 = np.clip(u_q, -V_lim, V_lim)                                     # q first
+        vd2 = np.clip(u_d, -np.sqrt(np.maximum(V_lim ** 2 - vq2 ** 2, 0.0)), np.sqrt(np.maximum(V_lim ** 2 - vq2 ** 2, 0.0)))
+        vlm = g["vlm"]
+        v_d = np.where(vlm == 1.0, vd1, np.where(vlm == 2.0, vd2, u_d * sc))
+        v_q = np.where(vlm == 1.0, vq1, np.where(vlm == 2.0, vq2, u_q * sc))
+        clamp = g["aw"] == 1.0
+        hold_d = clamp & (v_d != u_d) & (e_d * u_d > 0)
+        hold_q = clamp & (v_q != u_q) & (e_q * u_q > 0)
+        z_d = z_d + np.where(hold_d, 0.0, g["Ki_i"] * T * e_d) + np.where(clamp, 0.0, v_d - u_d)
+        z_q = z_q + np.where(hold_q, 0.0, g["Ki_i"] * T * e_q) + np.where(clamp, 0.0, v_q - u_q)
         va, vb = inverse_park(v_d, v_q, p * th_m + p * w_hat * 0.5 * T)
         R = g["R_ref"] * (1.0 + g["alpha"] * (T_w - g["T_ref"]))
         K = g["K0"] * (1.0 + g["beta"] * (T_h - g["T_ref"])) if has_beta else g["K0"]

@@ -9,6 +9,7 @@
 typedef struct { const double *par; int has_cog[3]; } Ctx;
 
 static double tanh_(double x) { return tanh(x); }
+static double clip(double x, double lim) { return x > lim ? lim : (x < -lim ? -lim : x); }
 
 static void torque_terms(const Ctx *c, double w, double th, double *fr, double *cog, double *ld) {
     const double *par = c->par;
@@ -79,13 +80,27 @@ int truth_kernel(const double *par, const double *ref, const double *fast, long 
         }
         double V_lim = G(m_lim) * V_bus;
         double e_d = -id_m, e_q = i_ref - iq_m;
-        double u_d = G(Kp_i) * e_d + z_d - p * w_hat * G(L_nom) * iq_m;
-        double u_q = G(Kp_i) * e_q + z_q + p * w_hat * G(L_nom) * id_m + G(K_nom) * w_hat;
-        double mag = hypot(u_d, u_q);
-        double sc = mag > V_lim ? V_lim / (mag > 1e-12 ? mag : 1e-12) : 1.0;
-        double v_d = u_d * sc, v_q = u_q * sc;
-        z_d += G(Ki_i) * T * e_d + (v_d - u_d);
-        z_q += G(Ki_i) * T * e_q + (v_q - u_q);
+        double u_d = G(Kp_i) * e_d + z_d - G(dec) * p * w_hat * G(L_nom) * iq_m;
+        double u_q = G(Kp_i) * e_q + z_q + G(dec) * (p * w_hat * G(L_nom) * id_m + G(K_nom) * w_hat);
+        double v_d, v_q;
+        if (G(vlm) == 1.0) {            /* d first, q takes what is left of the circle */
+            v_d = clip(u_d, V_lim);
+            v_q = clip(u_q, sqrt(fmax(V_lim * V_lim - v_d * v_d, 0.0)));
+        } else if (G(vlm) == 2.0) {     /* q first */
+            v_q = clip(u_q, V_lim);
+            v_d = clip(u_d, sqrt(fmax(V_lim * V_lim - v_q * v_q, 0.0)));
+        } else {                        /* the whole vector scaled onto the circle */
+            double mag = hypot(u_d, u_q);
+            double sc = mag > V_lim ? V_lim / (mag > 1e-12 ? mag : 1e-12) : 1.0;
+            v_d = u_d * sc; v_q = u_q * sc;
+        }
+        if (G(aw) == 1.0) {             /* conditional integration */
+            if (!(v_d != u_d && e_d * u_d > 0)) z_d += G(Ki_i) * T * e_d;
+            if (!(v_q != u_q && e_q * u_q > 0)) z_q += G(Ki_i) * T * e_q;
+        } else {                        /* back-calculation */
+            z_d += G(Ki_i) * T * e_d + (v_d - u_d);
+            z_q += G(Ki_i) * T * e_q + (v_q - u_q);
+        }
         double ang = p * th_m + p * w_hat * 0.5 * T;
         double ca = cos(ang), sa = sin(ang);
         double va = ca * v_d - sa * v_q, vb = sa * v_d + ca * v_q;
