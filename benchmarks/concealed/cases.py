@@ -78,10 +78,15 @@ class Excitation:
     seed: int = 0
     options: dict = field(default_factory=dict)
 
-    def build(self) -> Reference:
+    def build(self, rate: float = ex.RATE) -> Reference:
+        """The reference at ``rate`` [Hz] (the joint controller's): built at ex.RATE, interpolated above it."""
         theta = BUILDERS[self.kind](self.duration, self.seed, **self.options)
         n = int(round(self.duration * ex.RATE))
         theta = np.concatenate([theta, np.full(max(0, n - len(theta)), theta[-1])])[:n]
+        if rate > ex.RATE:
+            q = int(round(rate / ex.RATE))
+            theta = np.interp(np.arange(n * q) / rate, np.arange(n) / ex.RATE, theta)
+            return ex.reference(theta, rate)
         return ex.reference(theta)
 
 
@@ -147,7 +152,8 @@ class Case:
     #: alias (report["aliases"]) is scored "alias reported", not a silent miss
     alias_ok: dict = field(default_factory=dict)
     #: how the robot logs (see :func:`logged`): ``{"rate": Hz, "filter": "sample" | "mean"}``; {} = every
-    #: sample of the 1 kHz joint controller
+    #: sample of the 1 kHz joint controller; a rate above 1 kHz runs the joint controller at that rate and logs
+    #: every one of its samples (a drive that logs at its current-loop rate)
     log: dict = field(default_factory=dict)
     #: Drive fields of the world the recording comes from, not a hidden effect (the effect-free twin has them
     #: too): e.g. the speed estimator's bandwidth, a sensor filter the user's model does not describe
@@ -197,12 +203,19 @@ def _drive_from_nominal(params) -> Drive:
     )
 
 
+def controller_rate(case: Case) -> float:
+    """The joint controller's (and the recording's) rate [Hz]: 1 kHz, or the logger's rate above that."""
+    return max(ex.RATE, float(case.log.get("rate", ex.RATE)))
+
+
 def truth_specs(case: Case, *, effect: bool = True, noise: bool = True) -> tuple[TruthSpec, TruthSpec]:
     """(training, held-out) truth specs. ``effect=False``: the hidden effect removed (the nominal belief,
     same noise), ``noise=False``: ideal sensors — the twins used to measure effect and noise RMS."""
     params = nominal_params(case)
     plant = _plant_from_nominal(params)
     drive = replace(_drive_from_nominal(params), **case.environment)
+    if controller_rate(case) != drive.position_rate:
+        drive = replace(drive, position_rate=controller_rate(case))
     sensors = SENSORS
     if effect:
         plant = replace(plant, **{k: v for k, v in case.plant.items() if not k.startswith("sensor:")})
@@ -219,7 +232,8 @@ def truth_specs(case: Case, *, effect: bool = True, noise: bool = True) -> tuple
 # ------------------------------------------------------------------------------------------- the cases
 
 F_C = 0.010          #: hidden Coulomb friction [N·m motor] (≈ 1.3 × the q-current noise × K)
-E_OFF = (0.10, -0.06)  #: phase-current sensor offsets a, b [A] of the electrical-angle-ripple case
+E_OFF = (0.10, -0.06)
+VLIM_BUS = 16.0      #: [V] bus of the voltage-limit-mode cases: the swings spend a good part of their time at the limit  #: phase-current sensor offsets a, b [A] of the electrical-angle-ripple case
 
 
 def _ripple_amplitude_q(off_a: float, off_b: float) -> float:
@@ -344,6 +358,49 @@ CASES: tuple[Case, ...] = (
          "current loop with a 100 Hz speed estimator",
          {"viscous_friction": {"viscous_damping": 2.1e-4}}, plant={"b": 2.1e-4},
          nominal={"drive.current_loop_bandwidth": 250.0}, environment={"pll_bandwidth": 100.0}, seed=51),
+    # --- widened (issue #7): 10 kHz logs, 30-minute thermal runs, drives without decoupling / with clamping
+    #     anti-windup / another bandwidth, the drive's voltage-limit mode; a null in each style
+    Case("null_10khz", (), "nothing hidden: a drive that logs every 100 us (joint controller at 10 kHz)", {},
+         train=Excitation("mixed", 20.0, 61), heldout=Excitation("multisine", 10.0, 62), seed=61,
+         log={"rate": 10000.0, "filter": "sample"}),
+    Case("kt_frame_10khz", ("torque_constant_error",), "K_t taken in the wrong frame (true = nominal x sqrt(3/2)); "
+         "logged at 10 kHz", {"torque_constant_error": {"torque_constant_ratio": SQRT3_2}},
+         plant={"K": 0.0743 * SQRT3_2}, channel="voltage_q", train=Excitation("mixed", 20.0, 63),
+         heldout=Excitation("multisine", 10.0, 64), seed=63, log={"rate": 10000.0, "filter": "sample"}),
+    Case("null_thermal_30min", (), "nothing hidden: a 30-minute duty cycle under a 12 N·m brake load, logged at "
+         "100 Hz (averaged)", {}, nominal={"load.load_torque": 12.0},
+         train=Excitation("gait", 1800.0, 65, {"amplitude": 0.35}),
+         heldout=Excitation("gait", 600.0, 66, {"amplitude": 0.3, "freq": 0.9}), seed=65,
+         log={"rate": 100.0, "filter": "mean"}),
+    Case("thermal_network_30min", ("thermal_parameters",), "the housing cools worse than the datasheet says "
+         "(housing-to-ambient resistance 1.4 x nominal); a 30-minute duty cycle under a 12 N·m brake load, logged "
+         "at 100 Hz (averaged)", {"thermal_parameters": {"housing_to_ambient_resistance": 1.05}},
+         plant={"R_ha": 1.05}, nominal={"load.load_torque": 12.0},
+         train=Excitation("gait", 1800.0, 67, {"amplitude": 0.35}),
+         heldout=Excitation("gait", 600.0, 68, {"amplitude": 0.3, "freq": 0.9}), channel="voltage_q", seed=67,
+         log={"rate": 100.0, "filter": "mean"}),
+    Case("null_no_decoupling", (), "nothing hidden: a drive without decoupling feed-forward and with "
+         "conditional-integration anti-windup (the model says decoupling off)", {},
+         nominal={"drive.decoupling_enabled": False}, environment={"decoupling": False, "anti_windup": "clamp"},
+         seed=69),
+    Case("coulomb_no_decoupling", ("coulomb_friction",), "Coulomb friction left out; a drive without decoupling "
+         "and with clamping anti-windup", {"coulomb_friction": {"coulomb_friction": F_C}}, plant={"coulomb": F_C},
+         nominal={"drive.decoupling_enabled": False}, environment={"decoupling": False, "anti_windup": "clamp"},
+         seed=71),
+    Case("null_clamp_at_limit", (), "nothing hidden: swings into the voltage limit on a drive with "
+         "conditional-integration anti-windup (the model has back-calculation)", {},
+         environment={"anti_windup": "clamp"}, train=Excitation("swings", 40.0, 73),
+         heldout=Excitation("swings", 20.0, 74, {"freq": 2.4, "amplitude": 1.5}), seed=73),
+    Case("null_bandwidth_2khz", (), "nothing hidden: a 20 kHz current loop tuned to 2 kHz", {},
+         nominal={"drive.current_loop_rate": 20000.0, "drive.current_loop_bandwidth": 2000.0}, seed=75),
+    Case("vlimit_q_priority", ("voltage_limit_mode",), "the drive gives v_q the whole voltage circle (q priority); "
+         "the model scales the whole vector (proportional); swings into the limit",
+         {"voltage_limit_mode": {"voltage_limit_mode": "q_priority"}}, drive={"voltage_limit": "q_priority"},
+         nominal={"drive.bus_voltage": VLIM_BUS}, train=Excitation("swings", 40.0, 77), heldout=Excitation("swings", 20.0, 78, {"freq": 2.4, "amplitude": 1.5}),
+         seed=77),
+    Case("null_vlimit_proportional", (), "nothing hidden: swings into the voltage limit, the drive and the model "
+         "both proportional", {}, nominal={"drive.bus_voltage": VLIM_BUS}, train=Excitation("swings", 40.0, 79),
+         heldout=Excitation("swings", 20.0, 80, {"freq": 2.4, "amplitude": 1.5}), seed=79),
 )
 
 
@@ -377,6 +434,8 @@ def logged(rec: dict[str, np.ndarray], log: dict) -> dict[str, np.ndarray]:
     logger that averages, i.e. a moving-average sensor filter with a half-period lag of its own)."""
     if not log:
         return rec
+    if float(log["rate"]) >= ex.RATE:
+        return rec              # the controller runs (and records) at the logger's rate: every sample
     q = int(round(ex.RATE / float(log["rate"])))
     if q <= 1:
         return rec
@@ -436,7 +495,7 @@ def generate(cases, outdir: Path, *, progress: Callable[[str], None] | None = No
     refs = {}
     for case in cases:
         tr, ho = truth_specs(case)
-        r_tr, r_ho = case.train.build(), case.heldout.build()
+        r_tr, r_ho = case.train.build(controller_rate(case)), case.heldout.build(controller_rate(case))
         refs[case.name] = (r_tr, r_ho)
         jobs += [(case, "train", tr, r_tr), (case, "heldout", ho, r_ho)]
         jobs.append((case, "no_noise", truth_specs(case, noise=False)[0], r_tr))
@@ -485,7 +544,9 @@ def generate(cases, outdir: Path, *, progress: Callable[[str], None] | None = No
             "train": {"excitation": case.train.kind, "duration_s": case.train.duration, "seed": tr_spec.seed},
             "heldout": {"excitation": case.heldout.kind, "duration_s": case.heldout.duration, "seed": ho_spec.seed},
             "log": case.log or {"rate": ex.RATE, "filter": "sample"},
-            "drive": {"current_loop_bandwidth_hz": tr_spec.drive.bandwidth, "pll_bandwidth_hz": tr_spec.drive.pll_bandwidth},
+            "drive": {"current_loop_bandwidth_hz": tr_spec.drive.bandwidth, "pll_bandwidth_hz": tr_spec.drive.pll_bandwidth,
+                      "decoupling": tr_spec.drive.decoupling, "anti_windup": tr_spec.drive.anti_windup,
+                      "voltage_limit": tr_spec.drive.voltage_limit, "controller_rate_hz": tr_spec.drive.position_rate},
             "sensors": {"current_noise_per_phase_A": SENSORS.current_noise, "encoder_bits": SENSORS.encoder_bits,
                         "winding_temperature_quantum_degC": SENSORS.winding_quantum},
             "ranges": _ranges(full),

@@ -132,6 +132,9 @@ EXTRACTORS = {
     "copper_temperature_coefficient": lambda p, n: _get(p, "copper_temperature_coefficient", "alpha"),
     "magnet_temperature_coefficient": lambda p, n: _get(p, "magnet_temperature_coefficient", "beta"),
     "voltage_limit_ratio": _voltage_ratio,
+    "voltage_limit_mode": lambda p, n: p.get("voltage_limit_mode") if isinstance(p.get("voltage_limit_mode"), str)
+    else None,
+    "housing_to_ambient_resistance": lambda p, n: _get(p, "housing_to_ambient_resistance", "R_ha"),
 }
 
 
@@ -234,13 +237,15 @@ def score_case(truth: dict, report: dict | None, nominal_flat: dict, *, wall_tim
     for effect in hidden:
         params_true = truth["truth"][effect]
         main, true_value = next(iter(params_true.items()))
-        es = EffectScore(effect, effect in names, main, float(true_value))
+        categorical = isinstance(true_value, str)        # e.g. the drive's voltage-limit mode: exact or wrong
+        es = EffectScore(effect, effect in names, main, true_value if categorical else float(true_value))
         f = next((f for f in findings if f["effect"] == effect), None)
         if f is not None:
             est = EXTRACTORS.get(main, lambda p, n: _get(p, main))(f.get("parameters") or {}, nominal_flat)
             if est is not None:
                 es.estimate = est
-                es.rel_error = abs(est - es.true_value) / abs(es.true_value)
+                es.rel_error = (0.0 if est == true_value else 1.0) if categorical else \
+                    abs(est - es.true_value) / abs(es.true_value)
             ho = f.get("held_out") or {}
             es.held_out_metric = ho.get("metric")
             es.held_out_before, es.held_out_after = _num(ho.get("before")), _num(ho.get("after"))
@@ -323,6 +328,8 @@ def summarise(scores: list[CaseScore]) -> dict:
 def _fmt(x, spec=".3g", none="–"):
     if x is None:
         return none
+    if isinstance(x, str):      # a categorical value (the drive's voltage-limit mode)
+        return x
     return format(x, spec)
 
 

@@ -370,19 +370,39 @@ def replay(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], le
 
 def simulate_windows(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], length: float) -> dict:
     """Multiple shooting: every window started from the recorded state and simulated under every parameter set
-    in ONE :class:`BatchActuator` run. Returns the simulated and measured (low-passed) current, speed, angle and
-    q voltage (and the simulated d current ``sim_id``) as ``(samples, sets x windows)`` arrays (set-major columns) and the sample indices."""
+    in ONE :class:`BatchActuator` run (one per group of sets that share the current-loop rate and delay, which a
+    batch cannot mix). Returns the simulated and measured (low-passed) current, speed, angle and q voltage (and
+    the simulated d current ``sim_id``) as ``(samples, sets x windows)`` arrays (set-major columns) and the
+    sample indices."""
     L = max(5, int(round(length * ctx.fs)))
-    nW, nP = len(starts), len(param_sets)
+    nW = len(starts)
     plist = []
     use_sensor = "torque" in ctx.have
     for p in param_sets:
         if use_sensor:   # the sensor measures the load: the modelled load must not count twice
             p = p.replace(**{"load.load_torque": 0.0, "load.gravity_torque": 0.0, "load.spring_stiffness": 0.0})
         plist += [p] * nW
+    st = np.array(starts * len(param_sets))
+    sims = {k: np.zeros((L, len(plist))) for k in ("sim_i", "sim_w", "sim_th", "sim_v", "sim_id")}
+    groups: dict[tuple, list[int]] = {}
+    for c, p in enumerate(plist):
+        groups.setdefault((p.drive.current_loop_rate, p.drive.current_loop_delay), []).append(c)
+    for cols in groups.values():
+        part = _simulate_batch(ctx, [plist[c] for c in cols], st[cols], L, use_sensor)
+        for k, v in part.items():
+            sims[k][:, cols] = v
+    S = ctx.sig
+    i_meas = ctx.dec.lowpass(S["i_q"])
+    idx = st[None, :] + np.arange(1, L + 1)[:, None]
+    meas_v = ctx.dec.lowpass(S["v_q"])[idx] if "v_q" in S else None
+    return {**sims, "meas_i": i_meas[idx], "meas_w": S["omega_s"][idx], "meas_th": S["theta"][idx],
+            "meas_v": meas_v, "idx": idx}
+
+
+def _simulate_batch(ctx: Context, plist: list[ActuatorParams], st: np.ndarray, L: int, use_sensor: bool) -> dict:
+    """One :class:`BatchActuator` over windows starting at ``st`` (one parameter set per column)."""
     b = BatchActuator(plist)
     S = ctx.sig
-    st = np.array(starts * nP)
     i_meas = ctx.dec.lowpass(S["i_q"])
     w_meas = S["omega_s"]
     cmd, _ = _commands(ctx)
@@ -408,11 +428,7 @@ def simulate_windows(ctx: Context, param_sets: list[ActuatorParams], starts: lis
     dt = 1.0 / ctx.fs
     sensed = any(p.drive.current_sensor_offset_a or p.drive.current_sensor_offset_b
                  or p.drive.current_sensor_gain_a != 1.0 or p.drive.current_sensor_gain_b != 1.0 for p in plist)
-    sim_i = np.zeros((L, len(plist)))
-    sim_w = np.zeros((L, len(plist)))
-    sim_th = np.zeros((L, len(plist)))
-    sim_v = np.zeros((L, len(plist)))          # the drive's q voltage: where voltage-side effects show
-    sim_id = np.zeros((L, len(plist)))         # d current: where the drive's voltage-limit mode shows
+    out = {k: np.zeros((L, len(plist))) for k in ("sim_i", "sim_w", "sim_th", "sim_v", "sim_id")}
     for k in range(L):
         b.set_current_command(cmd[st + k])
         if load is not None:
@@ -420,18 +436,15 @@ def simulate_windows(ctx: Context, param_sets: list[ActuatorParams], starts: lis
         b.step(dt)
         # the current the drive's sensors report (what the recording holds), not the true winding current
         if sensed:
-            out = b.outputs()
-            sim_i[k], sim_id[k] = out["i_q_measured"], out["i_d_measured"]
+            o = b.outputs()
+            out["sim_i"][k], out["sim_id"][k] = o["i_q_measured"], o["i_d_measured"]
         else:
             i = b.field("i")
-            sim_i[k], sim_id[k] = i.imag, i.real
-        sim_w[k] = b.field("omega")
-        sim_th[k] = b.field("theta")
-        sim_v[k] = b.field("v").imag
-    idx = st[None, :] + np.arange(1, L + 1)[:, None]
-    meas_v = ctx.dec.lowpass(S["v_q"])[idx] if "v_q" in S else None
-    return {"sim_i": sim_i, "sim_w": sim_w, "sim_th": sim_th, "sim_v": sim_v, "sim_id": sim_id, "meas_i": i_meas[idx],
-            "meas_w": w_meas[idx], "meas_th": S["theta"][idx], "meas_v": meas_v, "idx": idx}
+            out["sim_i"][k], out["sim_id"][k] = i.imag, i.real
+        out["sim_w"][k] = b.field("omega")
+        out["sim_th"][k] = b.field("theta")
+        out["sim_v"][k] = b.field("v").imag          # the drive's q voltage: where voltage-side effects show
+    return out
 
 
 # -- thermal --------------------------------------------------------------------------------------
