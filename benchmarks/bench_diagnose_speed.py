@@ -46,7 +46,6 @@ def main() -> int:
 
     from test_diagnosis_analysis import NOMINAL, make_recording  # the unit tests' closed-loop generator
 
-    from bldc_actuator.cli import main as cli_main
     from bldc_actuator.params import dump_yaml
 
     truth = NOMINAL.replace(**{"effects.coulomb_friction": 0.015, "effects.cogging_order": 252,
@@ -66,26 +65,13 @@ def main() -> int:
 
     argv = ["diagnose", str(csv), "--params", str(tmp / "nominal.yaml"), "--json", str(tmp / "report.json"),
             "--report", str(tmp / "report"), "--updated-params", str(tmp / "updated.yaml"), "--quiet"]
-    walls = []
-    for k in range(args.repeat):
-        t0 = time.perf_counter()
-        with open(os.devnull, "w") as devnull:
-            stdout, sys.stdout = sys.stdout, devnull
-            try:
-                rc = cli_main(argv)
-            finally:
-                sys.stdout = stdout
-        walls.append(time.perf_counter() - t0)
-        if rc != 0:
-            print(f"diagnose failed with exit status {rc}")
-            return 1
+    walls = _time_cli(argv, args.repeat)
     rep = json.loads((tmp / "report.json").read_text())
     t0 = time.perf_counter()
     proc = subprocess.run([sys.executable, "-m", "bldc_actuator.cli"] + argv, capture_output=True, text=True)
     sub = time.perf_counter() - t0
-    walls_sorted = sorted(walls)
     print(f"\nend to end in-process (load + clean + diagnose + JSON + report.md/PNGs + params), {args.repeat} runs: "
-          f"best {walls_sorted[0]:.2f} s, median {walls_sorted[len(walls) // 2]:.2f} s")
+          f"best {walls[0]:.2f} s, median {walls[len(walls) // 2]:.2f} s")
     print(f"end to end as a subprocess (with interpreter start-up): {sub:.2f} s (exit {proc.returncode})")
     print("stages of the last run [s]: " + ", ".join(f"{k} {v:.2f}" for k, v in rep["timing"].items()))
     print(f"verdict: {rep['verdict']}")
@@ -93,7 +79,7 @@ def main() -> int:
         print(f"  {f['effect']}: " + ", ".join(f"{k}={v:.4g}" for k, v in f["parameters"].items()
                                                 if isinstance(v, (int, float))))
     target = 10.0
-    print(f"\ntarget: < {target:g} s for 60 s at 1 kHz -> {'MET' if walls_sorted[0] < target else 'NOT MET'} "
+    print(f"\ntarget: < {target:g} s for 60 s at 1 kHz -> {'MET' if walls[0] < target else 'NOT MET'} "
           f"(best in-process run)")
     return 0
 

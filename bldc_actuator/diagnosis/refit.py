@@ -387,26 +387,27 @@ def simulate_windows(ctx: Context, param_sets: list[ActuatorParams], starts: lis
     groups: dict[tuple, list[int]] = {}
     for c, p in enumerate(plist):
         groups.setdefault((p.drive.current_loop_rate, p.drive.current_loop_delay), []).append(c)
-    for cols in groups.values():
-        part = _simulate_batch(ctx, [plist[c] for c in cols], st[cols], L, use_sensor)
-        for k, v in part.items():
-            sims[k][:, cols] = v
     S = ctx.sig
     i_meas = ctx.dec.lowpass(S["i_q"])
+    cmd, _ = _commands(ctx)
+    load = ctx.raw["torque"] if use_sensor else (ctx.raw["load_torque"] if "load_torque" in ctx.have else None)
+    for cols in groups.values():
+        part = _simulate_batch(ctx, [plist[c] for c in cols], st[cols], L, i_meas, cmd, load)
+        for k, v in part.items():
+            sims[k][:, cols] = v
     idx = st[None, :] + np.arange(1, L + 1)[:, None]
     meas_v = ctx.dec.lowpass(S["v_q"])[idx] if "v_q" in S else None
     return {**sims, "meas_i": i_meas[idx], "meas_w": S["omega_s"][idx], "meas_th": S["theta"][idx],
             "meas_v": meas_v, "idx": idx}
 
 
-def _simulate_batch(ctx: Context, plist: list[ActuatorParams], st: np.ndarray, L: int, use_sensor: bool) -> dict:
-    """One :class:`BatchActuator` over windows starting at ``st`` (one parameter set per column)."""
+def _simulate_batch(ctx: Context, plist: list[ActuatorParams], st: np.ndarray, L: int, i_meas: np.ndarray,
+                    cmd: np.ndarray, load: np.ndarray | None) -> dict:
+    """One :class:`BatchActuator` over windows starting at ``st`` (one parameter set per column), driven by the
+    recorded command ``cmd`` and ``load`` and started from the low-passed current ``i_meas``."""
     b = BatchActuator(plist)
     S = ctx.sig
-    i_meas = ctx.dec.lowpass(S["i_q"])
     w_meas = S["omega_s"]
-    cmd, _ = _commands(ctx)
-    load = ctx.raw["torque"] if use_sensor else (ctx.raw["load_torque"] if "load_torque" in ctx.have else None)
     # the resistance and flux at each window's temperatures, as the kernel evaluates them (effects.py): the
     # initial voltage and PI integrator must hold the drop the model's own plant has there, else every window
     # starts with a current sag that is the initialisation's, not the model's (issue #7, R(T) judged worse)
