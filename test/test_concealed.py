@@ -293,14 +293,17 @@ def test_quick_subset_one_effect_one_null(tmp_path):
     assert err is not None and err < 0.5, coulomb
 
 
-@pytest.mark.parametrize("name", ["cogging", "electrical_ripple", "magnet_thermal"])
+@pytest.mark.parametrize("name", ["cogging", "electrical_ripple", "magnet_thermal", "kt_frame_10khz",
+                                  "cogging_drive_log_10khz"])
 def test_hidden_effect_is_identifiable_by_an_oracle(name):
     """Concealed is not absent: an estimator told the effect's form recovers its size from the recorded
-    channels alone (the hardest ones: N_c = 252 cogging, order-p ripple, −0.12 %/K flux)."""
+    channels alone (the hardest ones: N_c = 252 cogging, order-p ripple, −0.12 %/K flux; and at 10 kHz, where
+    the oracle once took its derivatives with a 1 ms step)."""
     from benchmarks.concealed import oracle
 
     case = C.get_case(name)
-    rec, = T.simulate([C.truth_specs(case)[0]], [case.train.build()])
+    rec, = T.simulate([C.truth_specs(case)[0]], [case.train.build(C.controller_rate(case))],
+                      post=lambda i, r: C.logged(r, case.log))
     main, est = oracle.estimate(name, {"effects": list(case.effects), "truth": case.truth,
                                        "nominal_overrides": case.nominal}, rec)
     true = case.truth[case.effects[0]][main]

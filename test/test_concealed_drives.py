@@ -19,6 +19,7 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from benchmarks.concealed import cases as C  # noqa: E402
 from benchmarks.concealed import excitation as ex  # noqa: E402
 from benchmarks.concealed import truth as T  # noqa: E402
 
@@ -178,3 +179,45 @@ def test_drive_log_holds_every_current_loop_tick_of_the_same_run():
     noise = tick["current"] - tick["true_i_q"]
     lag1 = np.corrcoef(noise[:-1], noise[1:])[0, 1]
     assert abs(lag1) < 0.05                                         # independent draws, tick to tick
+
+
+# --------------------------------------------------------------------------- the cases built on these options
+
+AT_LIMIT = ("v_saturation", "vlimit_q_priority", "null_vlimit_proportional", "null_clamp_at_limit",
+            "null_no_antiwindup")
+
+
+@needs_c
+@pytest.mark.parametrize("name", AT_LIMIT)
+def test_voltage_limit_cases_reach_the_limit_in_training_and_held_out(name):
+    case = C.get_case(name)
+    recs = T.simulate(list(C.truth_specs(case)), [case.train.build(), case.heldout.build()])
+    for role, r in zip(("train", "heldout"), recs):
+        on_circle = np.hypot(r["voltage_q"], r["true_v_d"]) > 0.99 * r["true_v_limit"]
+        assert on_circle.mean() > 0.01, (name, role, on_circle.mean())
+
+
+#: a drive/environment difference is visible when some logged channel moves by more than this (ideal sensors)
+#: (current_command: a drive without decoupling leaves a tracking error the joint controller's command absorbs)
+VISIBLE = {"current": 0.01, "current_command": 0.01, "voltage_q": 0.005, "velocity": 0.05}
+
+
+@needs_c
+def test_every_environment_is_visible_in_its_case_data():
+    """A case whose drive differs from the default (its ``environment``) must record something that differs:
+    otherwise the case is a plain null under another name (the clamp null on 24 V never reached the limit)."""
+    cases = [c for c in C.CASES if c.environment and not C.drive_logs_ticks(c) and c.train.duration <= 60.0]
+    assert {"null_clamp_at_limit", "null_no_antiwindup", "null_velocity_filter", "null_no_decoupling"} <= \
+        {c.name for c in cases}
+    specs, refs = [], []
+    for case in cases:
+        spec = ideal(C.truth_specs(case, effect=False)[0])
+        plain = replace(spec, drive=replace(spec.drive, **{k: getattr(T.Drive(), k) for k in case.environment}))
+        ref = case.train.build(C.controller_rate(case))
+        specs += [spec, plain]
+        refs += [ref, ref]
+    recs = T.simulate(specs, refs)
+    for k, case in enumerate(cases):
+        a, b = recs[2 * k], recs[2 * k + 1]
+        moved = {ch: float(np.sqrt(np.mean((a[ch] - b[ch]) ** 2))) for ch in VISIBLE}
+        assert any(moved[ch] > VISIBLE[ch] for ch in VISIBLE), (case.name, moved)

@@ -513,7 +513,8 @@ def _finish(spec: TruthSpec, raw: np.ndarray, slow: np.ndarray) -> dict[str, np.
 
 def simulate(specs: list[TruthSpec], refs: list[Reference], *, backend: str = "auto", workers: int = 2,
              progress: Callable[[int, int], None] | None = None,
-             post: Callable[[int, dict], dict] | None = None) -> list[dict[str, np.ndarray]]:
+             post: Callable[[int, dict], dict] | None = None,
+             timings: list | None = None) -> list[dict[str, np.ndarray]]:
     """Simulate each (spec, reference) pair; return per recording a dict of columns (``COLUMNS``) and noise-free
     internal signals ``true_*`` (motor side, SI), one sample per joint-controller step (every current-loop tick
     with ``drive.record_ticks``).
@@ -522,7 +523,9 @@ def simulate(specs: list[TruthSpec], refs: list[Reference], *, backend: str = "a
     (reference kernel, all recordings as one batch; slow) or ``"auto"`` (C when a compiler works).
     ``progress(done, total)`` is called after each recording (C backend). ``post(i, recording)``, when given,
     transforms recording ``i`` as soon as it is simulated (e.g. a logger's decimation: a 30-minute run at 1 kHz
-    need not stay in memory until the whole batch is done)."""
+    need not stay in memory until the whole batch is done). ``timings``, when given (a list as long as
+    ``specs``), receives each recording's simulation time [s] (C backend: per recording, in its worker thread;
+    numpy: the batch time shared equally)."""
     if len(specs) != len(refs) or not specs:
         raise ValueError("simulate: need one reference per spec")
     for s, r in zip(specs, refs):
@@ -533,11 +536,16 @@ def simulate(specs: list[TruthSpec], refs: list[Reference], *, backend: str = "a
     if backend == "c" and _c_library() is None:
         raise RuntimeError("C kernel unavailable")
 
+    import time
+
     def one(i):
+        t0 = time.perf_counter()
         spec, ref = specs[i], refs[i]
         slow, fast = _noise(spec, ref.n)
         raw = _kernel_c(param_vector(spec), np.stack([ref.theta_out, ref.omega_out, ref.alpha_out]), fast, ref.n)
         rec = _finish(spec, raw, slow)
+        if timings is not None:
+            timings[i] = time.perf_counter() - t0
         return post(i, rec) if post is not None else rec
 
     if backend == "c":
@@ -558,9 +566,12 @@ def simulate(specs: list[TruthSpec], refs: list[Reference], *, backend: str = "a
         raise ValueError("numpy backend: a batch must share reference length, loop rate, sub-steps and "
                          "record_ticks")
     n = refs[0].n
+    t0 = time.perf_counter()
     noises = [_noise(s, n) for s in specs]
     raw = _kernel_numpy(np.stack([param_vector(s) for s in specs]),
                         np.stack([np.stack([r.theta_out, r.omega_out, r.alpha_out]) for r in refs]),
                         np.stack([f for _, f in noises]), n)
     recs = [_finish(s, raw[i], noises[i][0]) for i, s in enumerate(specs)]
+    if timings is not None:
+        timings[:] = [(time.perf_counter() - t0) / len(specs)] * len(specs)
     return [post(i, r) for i, r in enumerate(recs)] if post is not None else recs
