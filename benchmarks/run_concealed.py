@@ -61,10 +61,16 @@ def ensure_data(cases, data_dir: Path, regenerate: bool, log) -> dict[str, dict]
     if todo:
         log(f"generating {len(todo)} case(s) with the truth simulator -> {data_dir}")
         t0 = time.perf_counter()
-        C.generate(todo, data_dir, progress=lambda m: log("  " + m))
+        made = C.generate(todo, data_dir, progress=lambda m: log("  " + m))
         for case in todo:
             (data_dir / case.name / ".generator").write_text(stamp)
-        log(f"  generated in {time.perf_counter() - t0:.1f} s")
+        log(f"  generated in {time.perf_counter() - t0:.1f} s (wall); simulation time per case, summed over its "
+            f"recordings (training, held-out, twins):")
+        for case in todo:
+            t = made[case.name]
+            log(f"    {case.name:28s} {t.get('generation_seconds', float('nan')):6.1f} s  "
+                f"({t['train']['duration_s']:.0f} s + {t['heldout']['duration_s']:.0f} s recorded, "
+                f"log {t['log'].get('rate', 1000.0):g} Hz)")
     else:
         log(f"using cached recordings in {data_dir} (generator {stamp})")
     return {c.name: scoring.load_json(data_dir / c.name / "truth.json") for c in cases}

@@ -153,7 +153,8 @@ class Case:
     alias_ok: dict = field(default_factory=dict)
     #: how the robot logs (see :func:`logged`): ``{"rate": Hz, "filter": "sample" | "mean"}``; {} = every
     #: sample of the 1 kHz joint controller; a rate above 1 kHz runs the joint controller at that rate and logs
-    #: every one of its samples (a drive that logs at its current-loop rate)
+    #: every one of its samples; ``"source": "drive"`` with ``rate`` = the current-loop rate: the drive logs
+    #: every current-loop tick while the joint controller stays at 1 kHz (its command steps every 10 samples)
     log: dict = field(default_factory=dict)
     #: Drive fields of the world the recording comes from, not a hidden effect (the effect-free twin has them
     #: too): e.g. the speed estimator's bandwidth, a sensor filter the user's model does not describe
@@ -203,8 +204,16 @@ def _drive_from_nominal(params) -> Drive:
     )
 
 
+def drive_logs_ticks(case: Case) -> bool:
+    """The drive logs every current-loop tick (``log["source"] == "drive"``)."""
+    return case.log.get("source") == "drive"
+
+
 def controller_rate(case: Case) -> float:
-    """The joint controller's (and the recording's) rate [Hz]: 1 kHz, or the logger's rate above that."""
+    """The joint controller's rate [Hz]: 1 kHz, or the logger's rate above that (unless the drive logs its own
+    ticks: then the joint controller stays at 1 kHz)."""
+    if drive_logs_ticks(case):
+        return ex.RATE
     return max(ex.RATE, float(case.log.get("rate", ex.RATE)))
 
 
@@ -216,6 +225,10 @@ def truth_specs(case: Case, *, effect: bool = True, noise: bool = True) -> tuple
     drive = replace(_drive_from_nominal(params), **case.environment)
     if controller_rate(case) != drive.position_rate:
         drive = replace(drive, position_rate=controller_rate(case))
+    if drive_logs_ticks(case):
+        if abs(float(case.log["rate"]) - drive.current_loop_rate) > 1e-9:
+            raise ValueError(f"{case.name}: a drive log's rate is the current-loop rate {drive.current_loop_rate} Hz")
+        drive = replace(drive, record_ticks=True)
     sensors = SENSORS
     if effect:
         plant = replace(plant, **{k: v for k, v in case.plant.items() if not k.startswith("sensor:")})
@@ -232,8 +245,11 @@ def truth_specs(case: Case, *, effect: bool = True, noise: bool = True) -> tuple
 # ------------------------------------------------------------------------------------------- the cases
 
 F_C = 0.010          #: hidden Coulomb friction [N·m motor] (≈ 1.3 × the q-current noise × K)
-E_OFF = (0.10, -0.06)
-VLIM_BUS = 16.0      #: [V] bus of the voltage-limit-mode cases: the swings spend a good part of their time at the limit  #: phase-current sensor offsets a, b [A] of the electrical-angle-ripple case
+E_OFF = (0.10, -0.06)  #: phase-current sensor offsets a, b [A] of the electrical-angle-ripple case
+VLIM_BUS = 16.0      #: [V] bus of the voltage-limit cases: the swings spend a good part of their time at the limit
+#: the drive's own log: every current-loop tick, the joint controller at 1 kHz
+DRIVE_LOG_10KHZ = {"rate": 10000.0, "filter": "sample", "source": "drive"}
+VELOCITY_FILTER_HZ = 40.0  #: first-order low-pass on the drive's reported speed (20 Hz works, 10 Hz destabilises)
 
 
 def _ripple_amplitude_q(off_a: float, off_b: float) -> float:
@@ -387,9 +403,11 @@ CASES: tuple[Case, ...] = (
          "and with clamping anti-windup", {"coulomb_friction": {"coulomb_friction": F_C}}, plant={"coulomb": F_C},
          nominal={"drive.decoupling_enabled": False}, environment={"decoupling": False, "anti_windup": "clamp"},
          seed=71),
-    Case("null_clamp_at_limit", (), "nothing hidden: swings into the voltage limit on a drive with "
+    # on a 16 V bus (the model says so): on 24 V these swings kept 11 % voltage headroom and the clamp never acted
+    Case("null_clamp_at_limit", (), "nothing hidden: swings into the voltage limit (16 V bus) on a drive with "
          "conditional-integration anti-windup (the model has back-calculation)", {},
-         environment={"anti_windup": "clamp"}, train=Excitation("swings", 40.0, 73),
+         nominal={"drive.bus_voltage": VLIM_BUS}, environment={"anti_windup": "clamp"},
+         train=Excitation("swings", 40.0, 73),
          heldout=Excitation("swings", 20.0, 74, {"freq": 2.4, "amplitude": 1.5}), seed=73),
     Case("null_bandwidth_2khz", (), "nothing hidden: a 20 kHz current loop tuned to 2 kHz", {},
          nominal={"drive.current_loop_rate": 20000.0, "drive.current_loop_bandwidth": 2000.0}, seed=75),
@@ -401,6 +419,50 @@ CASES: tuple[Case, ...] = (
     Case("null_vlimit_proportional", (), "nothing hidden: swings into the voltage limit, the drive and the model "
          "both proportional", {}, nominal={"drive.bus_voltage": VLIM_BUS}, train=Excitation("swings", 40.0, 79),
          heldout=Excitation("swings", 20.0, 80, {"freq": 2.4, "amplitude": 1.5}), seed=79),
+    # --- widened further (issue #7): the drive's own 10 kHz log with the joint controller at 1 kHz, 30-minute runs
+    #     logged at 10 Hz, a drive without anti-windup, a velocity output filter; each effect with its null
+    Case("null_drive_log_10khz", (), "nothing hidden: the drive logs every current-loop tick (10 kHz) while the "
+         "joint controller runs at 1 kHz (its current command steps every 10 samples)", {},
+         train=Excitation("mixed", 30.0, 83), heldout=Excitation("multisine", 15.0, 84), seed=83,
+         log=DRIVE_LOG_10KHZ),
+    Case("cogging_drive_log_10khz", ("cogging_torque",), "cogging of the 36-slot/42-pole stator (order "
+         f"{COGGING_ORDER}) left out; the drive logs every current-loop tick (10 kHz), joint controller at 1 kHz",
+         {"cogging_torque": {"cogging_amplitude": 0.006, "cogging_order": COGGING_ORDER}},
+         plant={"cogging_amp": (0.006, 0.002), "cogging_phase": (0.7, 2.1)},
+         train=Excitation("mixed", 30.0, 85, {"speeds": (0.02, 0.05, 0.15)}), heldout=Excitation("multisine", 15.0, 86),
+         seed=85, log=DRIVE_LOG_10KHZ),
+    Case("null_thermal_30min_10hz", (), "nothing hidden: a 30-minute run under a light 4 N·m payload (the winding "
+         "warms by about 6 K), logged at 10 Hz (averaged), R(T) modelled", {},
+         nominal={"load.load_torque": 4.0}, train=Excitation("gait", 1800.0, 87, {"amplitude": 0.35}),
+         heldout=Excitation("gait", 600.0, 88, {"amplitude": 0.3, "freq": 0.9}), seed=87,
+         log={"rate": 10.0, "filter": "mean"}),
+    Case("r_thermal_30min", ("resistance_temperature",), "R(T) switched off in the model; a 30-minute run under a "
+         "light 4 N·m payload (the winding warms by about 6 K), logged at 10 Hz (averaged)",
+         {"resistance_temperature": {"copper_temperature_coefficient": 0.00393}}, plant={"alpha_cu": 0.00393},
+         nominal={"motor.resistance_temperature_enabled": False, "load.load_torque": 4.0},
+         train=Excitation("gait", 1800.0, 89, {"amplitude": 0.35}),
+         heldout=Excitation("gait", 600.0, 90, {"amplitude": 0.3, "freq": 0.9}), channel="voltage_q", seed=89,
+         log={"rate": 10.0, "filter": "mean"}),
+    Case("null_no_antiwindup", (), "nothing hidden: swings that touch the voltage limit (16 V bus) on a drive whose "
+         "current-loop integrators have no anti-windup (they wind up at the limit: current overshoots after it)", {},
+         nominal={"drive.bus_voltage": VLIM_BUS}, environment={"anti_windup": "none"},
+         train=Excitation("swings", 40.0, 91, {"amplitude": 1.25, "freq": 2.3}),
+         heldout=Excitation("swings", 20.0, 92, {"amplitude": 1.2, "freq": 2.4}), seed=91),
+    Case("null_no_decoupling_300hz", (), "nothing hidden: a plain drive (no decoupling, clamping anti-windup) tuned "
+         "to 300 Hz, faster strides (1.8 Hz): the back-EMF leaves a tracking error ~10 x the command's noise (the "
+         "model says decoupling off, 300 Hz)", {},
+         nominal={"drive.decoupling_enabled": False, "drive.current_loop_bandwidth": 300.0},
+         environment={"decoupling": False, "anti_windup": "clamp"},
+         train=Excitation("mixed", 40.0, 97, {"freq": 1.8, "amplitude": 0.6}),
+         heldout=Excitation("gait", 20.0, 98, {"freq": 1.6, "amplitude": 0.5}), seed=97),
+    Case("null_velocity_filter", (), "nothing hidden: the drive reports its speed through a 40 Hz first-order "
+         "low-pass (the joint controller's D term uses it too)", {},
+         environment={"velocity_filter": VELOCITY_FILTER_HZ}, seed=93,
+         train=Excitation("mixed", 40.0, 93), heldout=Excitation("multisine", 20.0, 94)),
+    Case("coulomb_velocity_filter", ("coulomb_friction",), "Coulomb friction left out; the drive reports its speed "
+         "through a 40 Hz first-order low-pass", {"coulomb_friction": {"coulomb_friction": F_C}},
+         plant={"coulomb": F_C}, environment={"velocity_filter": VELOCITY_FILTER_HZ}, seed=95,
+         train=Excitation("mixed", 40.0, 95), heldout=Excitation("multisine", 20.0, 96)),
 )
 
 
@@ -435,7 +497,7 @@ def logged(rec: dict[str, np.ndarray], log: dict) -> dict[str, np.ndarray]:
     if not log:
         return rec
     if float(log["rate"]) >= ex.RATE:
-        return rec              # the controller runs (and records) at the logger's rate: every sample
+        return rec              # the controller (or the drive) records at the logger's rate: every sample
     q = int(round(ex.RATE / float(log["rate"])))
     if q <= 1:
         return rec
@@ -506,8 +568,11 @@ def generate(cases, outdir: Path, *, progress: Callable[[str], None] | None = No
         if progress is not None and (done == total or done % 8 == 0):
             progress(f"simulated {done}/{total} recordings")
 
-    results = simulate([j[2] for j in jobs], [j[3] for j in jobs], workers=workers, progress=tick)
-    by = {(j[0].name, j[1]): logged(r, j[0].log) for j, r in zip(jobs, results)}
+    # each recording goes through its logger as soon as it is simulated (30-minute runs at 1 kHz are large)
+    seconds = [0.0] * len(jobs)
+    results = simulate([j[2] for j in jobs], [j[3] for j in jobs], workers=workers, progress=tick,
+                       post=lambda i, r: logged(r, jobs[i][0].log), timings=seconds)
+    by = {(j[0].name, j[1]): r for j, r in zip(jobs, results)}
     truths = {}
     for case in cases:
         d = outdir / case.name
@@ -546,10 +611,13 @@ def generate(cases, outdir: Path, *, progress: Callable[[str], None] | None = No
             "log": case.log or {"rate": ex.RATE, "filter": "sample"},
             "drive": {"current_loop_bandwidth_hz": tr_spec.drive.bandwidth, "pll_bandwidth_hz": tr_spec.drive.pll_bandwidth,
                       "decoupling": tr_spec.drive.decoupling, "anti_windup": tr_spec.drive.anti_windup,
-                      "voltage_limit": tr_spec.drive.voltage_limit, "controller_rate_hz": tr_spec.drive.position_rate},
+                      "voltage_limit": tr_spec.drive.voltage_limit, "controller_rate_hz": tr_spec.drive.position_rate,
+                      "velocity_filter_hz": tr_spec.drive.velocity_filter, "records_every_tick": tr_spec.drive.record_ticks},
             "sensors": {"current_noise_per_phase_A": SENSORS.current_noise, "encoder_bits": SENSORS.encoder_bits,
                         "winding_temperature_quantum_degC": SENSORS.winding_quantum},
             "ranges": _ranges(full),
+            # simulation time of the case's recordings (training, held-out and the twins), summed over worker threads
+            "generation_seconds": sum(t for j, t in zip(jobs, seconds) if j[0].name == case.name),
         }
         (d / "truth.json").write_text(json.dumps(truth, indent=2, default=float) + "\n")
         truths[case.name] = truth

@@ -47,6 +47,19 @@ def _get(params: dict, *names: str) -> float | None:
     return None
 
 
+def _get_str(params: dict, *names: str) -> str | None:
+    """A categorical parameter: the first key equal to (or ending with ``.``) one of ``names`` whose value is a
+    string, or a dict holding one under value / estimate."""
+    for name in names:
+        for key, val in params.items():
+            if key == name or key.endswith("." + name):
+                if isinstance(val, dict):
+                    val = next((val[k] for k in ("value", "estimate") if isinstance(val.get(k), str)), None)
+                if isinstance(val, str):
+                    return val
+    return None
+
+
 def _get_list(params: dict, *names: str) -> list | None:
     for name in names:
         for key, val in params.items():
@@ -132,8 +145,7 @@ EXTRACTORS = {
     "copper_temperature_coefficient": lambda p, n: _get(p, "copper_temperature_coefficient", "alpha"),
     "magnet_temperature_coefficient": lambda p, n: _get(p, "magnet_temperature_coefficient", "beta"),
     "voltage_limit_ratio": _voltage_ratio,
-    "voltage_limit_mode": lambda p, n: p.get("voltage_limit_mode") if isinstance(p.get("voltage_limit_mode"), str)
-    else None,
+    "voltage_limit_mode": lambda p, n: _get_str(p, "voltage_limit_mode", "drive.voltage_limit_mode", "mode"),
     "housing_to_ambient_resistance": lambda p, n: _get(p, "housing_to_ambient_resistance", "R_ha"),
 }
 
@@ -145,9 +157,11 @@ class EffectScore:
     effect: str
     found: bool
     parameter: str
-    true_value: float
-    estimate: float | None = None
-    rel_error: float | None = None
+    true_value: float | str             #: a string for a categorical parameter (the drive's voltage-limit mode)
+    estimate: float | str | None = None
+    rel_error: float | None = None      #: numeric parameters only
+    #: categorical parameters (a mode, a name): estimate == truth; None for numeric ones or when not estimated
+    value_correct: bool | None = None
     held_out_metric: str | None = None
     held_out_before: float | None = None
     held_out_after: float | None = None
@@ -241,11 +255,16 @@ def score_case(truth: dict, report: dict | None, nominal_flat: dict, *, wall_tim
         es = EffectScore(effect, effect in names, main, true_value if categorical else float(true_value))
         f = next((f for f in findings if f["effect"] == effect), None)
         if f is not None:
-            est = EXTRACTORS.get(main, lambda p, n: _get(p, main))(f.get("parameters") or {}, nominal_flat)
+            default = (lambda p, n: _get_str(p, main)) if categorical else (lambda p, n: _get(p, main))
+            est = EXTRACTORS.get(main, default)(f.get("parameters") or {}, nominal_flat)
+            if categorical and not isinstance(est, str):
+                est = None                    # a number where a mode was expected: not an estimate of it
             if est is not None:
                 es.estimate = est
-                es.rel_error = (0.0 if est == true_value else 1.0) if categorical else \
-                    abs(est - es.true_value) / abs(es.true_value)
+                if categorical:               # exact or wrong; no relative error (it would enter the means)
+                    es.value_correct = est == true_value
+                else:
+                    es.rel_error = abs(est - es.true_value) / abs(es.true_value)
             ho = f.get("held_out") or {}
             es.held_out_metric = ho.get("metric")
             es.held_out_before, es.held_out_after = _num(ho.get("before")), _num(ho.get("after"))
@@ -311,6 +330,9 @@ def summarise(scores: list[CaseScore]) -> dict:
         "parameters_scored": len(errs),
         "mean_parameter_error": sum(errs) / len(errs) if errs else None,
         "median_parameter_error": sorted(errs)[len(errs) // 2] if errs else None,
+        # categorical main parameters (exact or wrong) of named effects; not in the relative-error numbers
+        "categorical_scored": sum(e.value_correct is not None for s in effect_cases for e in s.effects if e.found),
+        "categorical_correct": sum(bool(e.value_correct) for s in effect_cases for e in s.effects if e.found),
         "mean_held_out_improvement": sum(improvements) / len(improvements) if improvements else None,
         "missed_but_reported_aliased": sum(len(s.aliased) for s in effect_cases),
         "simulated_better": sum(s.simulated == "better" for s in effect_cases),
@@ -353,7 +375,11 @@ def rows(scores: list[CaseScore], truths: dict[str, dict]) -> list[list[str]]:
         params, errs, held = [], [], []
         for e in s.effects:
             params.append(f"{_fmt(e.true_value)}→{_fmt(e.estimate)}")
-            errs.append(_fmt(None if e.rel_error is None else 100 * e.rel_error, ".0f") + ("%" if e.rel_error is not None else ""))
+            if e.value_correct is not None:
+                errs.append("exact" if e.value_correct else "wrong")
+            else:
+                errs.append(_fmt(None if e.rel_error is None else 100 * e.rel_error, ".0f")
+                            + ("%" if e.rel_error is not None else ""))
             held.append(f"{_fmt(e.held_out_before)}→{_fmt(e.held_out_after)}" if e.found else "–")
         out.append([
             s.case,
@@ -408,7 +434,9 @@ def summary_text(summary: dict) -> str:
             f"extra effects named on effect cases: {summary['extra_effects_on_effect_cases']}; missed but reported "
             f"as aliased with a named effect: {summary.get('missed_but_reported_aliased', 0)}\n"
             f"main-parameter error: mean {pct(summary['mean_parameter_error'])}, median "
-            f"{pct(summary['median_parameter_error'])} over {summary['parameters_scored']} scored parameters; "
+            f"{pct(summary['median_parameter_error'])} over {summary['parameters_scored']} scored parameters"
+            + (f" (categorical: {summary['categorical_correct']}/{summary['categorical_scored']} exact)"
+               if summary.get("categorical_scored") else "") + "; "
             f"mean held-out improvement of the named hidden effects: {pct(summary['mean_held_out_improvement'])}\n"
             f"simulated actuator with the updated parameters vs the nominal ones on held-out data: better in "
             f"{summary.get('simulated_better', 0)} of {summary.get('simulated_judged', 0)} effect cases; worse in "

@@ -132,14 +132,24 @@ class Drive:
     gravity_ff_out: float = 0.0          #: known gravity feed-forward amplitude [N·m, output]
     gravity_ff_phase: float = 0.0
     coulomb_ff: float = 0.0              #: known Coulomb friction feed-forward [N·m, motor side]
-    decoupling: bool = True              #: PI output + ω·L cross-coupling and back-EMF feed-forward (speed estimate)
+    #: True: the PI outputs get the feed-forward u_d -= p ω̂ L i_q, u_q += p ω̂ L i_d + K ω̂ (ω̂ = the PLL speed, the
+    #: nominal L and K); False: plain PI, the integrator has to build up the back-EMF itself (it lags at speed)
+    decoupling: bool = True
     #: "back_calculation": the integrator takes the limiter's cut back (z += Ki T e + (v - u));
     #: "clamp": conditional integration, an axis's integrator frozen while its output is cut and the error
-    #: pushes further into the cut
+    #: pushes further into the cut; "none": the integrator always integrates (winds up at the voltage limit)
     anti_windup: str = "back_calculation"
     #: the PI output (u_d, u_q) onto the circle |v| <= V_lim: "proportional" scales the whole vector,
-    #: "d_priority" keeps u_d (clamped) and gives v_q the rest, "q_priority" keeps u_q and gives v_d the rest
+    #: "d_priority" keeps u_d (clamped to ±V_lim) and gives v_q what is left of the circle, "q_priority" keeps
+    #: u_q (clamped) and gives v_d what is left (the product's drive.voltage_limit_mode, same meanings)
     voltage_limit: str = "proportional"
+    #: first-order low-pass [Hz] on the speed the drive REPORTS (0 = none): ``ω_f += a (ω̂ - ω_f)`` each current-loop
+    #: tick, ``a = 1 - exp(-2π f T)``. The logged ``velocity`` and the joint controller's D term use ω_f; the
+    #: current loop's decoupling keeps the unfiltered PLL speed ω̂ (a firmware's display/velocity-output filter)
+    velocity_filter: float = 0.0
+    #: True: the recording holds every current-loop tick (a drive that logs at its current-loop rate, e.g.
+    #: 10 kHz), with the joint controller still at ``position_rate``; False: one sample per joint-controller step
+    record_ticks: bool = False
 
 
 @dataclass(frozen=True)
@@ -199,12 +209,12 @@ PARAM_NAMES = (
     "C_w", "C_h", "R_wh", "R_ha", "T_amb", "T_w0", "T_h0", "V_s", "R_s",
     # drive
     "f_cl", "sub", "ticks_per_pos", "Kp_i", "Ki_i", "L_nom", "K_nom", "m_lim", "I_lim", "k1_pll", "k2_pll",
-    "kp_out", "kd_out", "N_nom", "J_ff_out", "ff_const", "ff_g", "ff_gph", "ff_c", "dec", "aw", "vlm",
+    "kp_out", "kd_out", "N_nom", "J_ff_out", "ff_const", "ff_g", "ff_gph", "ff_c", "dec", "aw", "vlm", "a_vf", "rec_all",
     # sensors
     "sig_i", "off_a", "off_b", "g_a", "g_b", "q_enc",
 )
 N_COGGING_HARMONICS = 3
-ANTI_WINDUP = ("back_calculation", "clamp")
+ANTI_WINDUP = ("back_calculation", "clamp", "none")
 VOLTAGE_LIMITS = ("proportional", "d_priority", "q_priority")
 
 
@@ -239,26 +249,45 @@ def param_vector(spec: TruthSpec) -> np.ndarray:
         J_ff_out=D.J_ff * D.N_nom ** 2, ff_const=D.load_const_ff_out, ff_g=D.gravity_ff_out,
         ff_gph=D.gravity_ff_phase, ff_c=D.coulomb_ff * D.N_nom, dec=1.0 if D.decoupling else 0.0,
         aw=float(ANTI_WINDUP.index(D.anti_windup)), vlm=float(VOLTAGE_LIMITS.index(D.voltage_limit)),
+        a_vf=1.0 - math.exp(-TWO_PI * D.velocity_filter / D.current_loop_rate) if D.velocity_filter > 0 else 1.0,
+        rec_all=1.0 if D.record_ticks else 0.0,
         sig_i=S.current_noise * on, off_a=S.offset_a, off_b=S.offset_b, g_a=S.gain_a, g_b=S.gain_b,
         q_enc=TWO_PI / 2.0 ** S.encoder_bits if S.enabled else 0.0,
     )
     return np.array([float(values[n]) for n in PARAM_NAMES])
 
 
-def _noise(spec: TruthSpec, n_rec: int):
-    """Seeded noise of one recording: slow channels (3, n_rec) and phase-current sensors (2, n_ticks)."""
+def ticks_per_sample(drive: Drive) -> int:
+    """Current-loop ticks per joint-controller step."""
+    return round(drive.current_loop_rate / drive.position_rate)
+
+
+def samples(drive: Drive, n_ref: int) -> int:
+    """Recorded samples of a run whose reference has ``n_ref`` joint-controller steps."""
+    return n_ref * ticks_per_sample(drive) if drive.record_ticks else n_ref
+
+
+def _noise(spec: TruthSpec, n_ref: int):
+    """Seeded noise of one recording: slow channels (3, n_samples) and phase-current sensors (2, n_ticks).
+    With ``record_ticks`` the slow channels' noise at the joint-controller steps is the same draw as without
+    (the extra tick samples get their own draw afterwards): a tick log sampled every ``ticks`` is the same
+    recording as the one-per-step log of the same seed."""
     rng = np.random.default_rng(spec.seed)
-    slow = rng.standard_normal((3, n_rec))
-    ticks = round(spec.drive.current_loop_rate / spec.drive.position_rate)
-    fast = rng.standard_normal((2, n_rec * ticks))
+    slow = rng.standard_normal((3, n_ref))
+    ticks = ticks_per_sample(spec.drive)
+    fast = rng.standard_normal((2, n_ref * ticks))
+    if spec.drive.record_ticks and ticks > 1:
+        every = rng.standard_normal((3, n_ref * ticks))
+        every[:, ::ticks] = slow
+        slow = every
     return slow, fast
 
 
 # ---- numpy kernel: the readable reference (and fallback); many recordings as columns ---------------
 
 def _kernel_numpy(par: np.ndarray, ref: np.ndarray, fast: np.ndarray, n_rec: int) -> np.ndarray:
-    """``par`` (B, n_par), ``ref`` (B, 3, n_rec) [θ_out, ω_out, α_out], ``fast`` (B, 2, n_ticks) →
-    ``out`` (B, len(KERNEL_ROWS), n_rec)."""
+    """``par`` (B, n_par), ``ref`` (B, 3, n_rec) [θ_out, ω_out, α_out] (``n_rec`` joint-controller steps),
+    ``fast`` (B, 2, n_ticks) → ``out`` (B, len(KERNEL_ROWS), n_rec), or (..., n_ticks) with ``record_ticks``."""
     g = {name: par[:, i] for i, name in enumerate(PARAM_NAMES)}
     B = par.shape[0]
     p, L, J, b, N = g["p"], g["L"], g["J"], g["b"], g["N"]
@@ -291,7 +320,9 @@ def _kernel_numpy(par: np.ndarray, ref: np.ndarray, fast: np.ndarray, n_rec: int
         return ((vd - R * i_d_ + pwL * i_q_) * invL, (vq - R * i_q_ - pwL * i_d_ - K * w_) * invL,
                 (K * i_q_ - fr - cog - ld) * invJ)
 
-    out = np.zeros((B, len(KERNEL_ROWS), n_rec))
+    rec_all = bool(g["rec_all"][0])
+    filt = np.any(g["a_vf"] < 1.0)
+    out = np.zeros((B, len(KERNEL_ROWS), n_rec * tpp if rec_all else n_rec))
     row = {name: i for i, name in enumerate(KERNEL_ROWS)}
     i_d = np.zeros(B)
     i_q = np.zeros(B)
@@ -299,7 +330,7 @@ def _kernel_numpy(par: np.ndarray, ref: np.ndarray, fast: np.ndarray, n_rec: int
     th = ref[:, 0, 0] * N
     T_w, T_h = g["T_w0"].copy(), g["T_h0"].copy()
     z_d, z_q = np.zeros(B), np.zeros(B)
-    th_hat, w_hat = th.copy(), np.zeros(B)
+    th_hat, w_hat, w_f = th.copy(), np.zeros(B), np.zeros(B)
     i_ref = np.zeros(B)
     V_bus = g["V_s"].copy()
     p_el = np.zeros(B)
@@ -312,11 +343,14 @@ def _kernel_numpy(par: np.ndarray, ref: np.ndarray, fast: np.ndarray, n_rec: int
         e = th_m - th_hat
         th_hat = th_hat + T * (w_hat + g["k1_pll"] * e)
         w_hat = w_hat + T * g["k2_pll"] * e
-        rec = j % tpp == 0
-        if rec:
+        # the speed the drive reports (exactly the PLL's where the filter is off, as in the C kernel)
+        w_f = np.where(g["a_vf"] < 1.0, w_f + g["a_vf"] * (w_hat - w_f), w_hat) if filt else w_hat
+        step = j % tpp == 0
+        rec = step or rec_all
+        if step:
             k = j // tpp
             th_r, w_r, a_r = ref[:, 0, k], ref[:, 1, k], ref[:, 2, k]
-            tau = (g["kp_out"] * (th_r - th_m / g["N_nom"]) + g["kd_out"] * (w_r - w_hat / g["N_nom"])
+            tau = (g["kp_out"] * (th_r - th_m / g["N_nom"]) + g["kd_out"] * (w_r - w_f / g["N_nom"])
                    + g["J_ff_out"] * a_r + g["ff_const"] + g["ff_g"] * np.sin(th_r + g["ff_gph"])
                    + g["ff_c"] * np.tanh(w_r / 0.05))
             i_ref = np.clip(tau / (g["N_nom"] * g["K_nom"]), -g["I_lim"], g["I_lim"])
@@ -336,20 +370,22 @@ def _kernel_numpy(par: np.ndarray, ref: np.ndarray, fast: np.ndarray, n_rec: int
         clamp = g["aw"] == 1.0
         hold_d = clamp & (v_d != u_d) & (e_d * u_d > 0)
         hold_q = clamp & (v_q != u_q) & (e_q * u_q > 0)
-        z_d = z_d + np.where(hold_d, 0.0, g["Ki_i"] * T * e_d) + np.where(clamp, 0.0, v_d - u_d)
-        z_q = z_q + np.where(hold_q, 0.0, g["Ki_i"] * T * e_q) + np.where(clamp, 0.0, v_q - u_q)
+        back = g["aw"] == 0.0                 # back-calculation; "none" (2) integrates regardless
+        z_d = z_d + np.where(hold_d, 0.0, g["Ki_i"] * T * e_d) + np.where(back, v_d - u_d, 0.0)
+        z_q = z_q + np.where(hold_q, 0.0, g["Ki_i"] * T * e_q) + np.where(back, v_q - u_q, 0.0)
         va, vb = inverse_park(v_d, v_q, p * th_m + p * w_hat * 0.5 * T)
         R = g["R_ref"] * (1.0 + g["alpha"] * (T_w - g["T_ref"]))
         K = g["K0"] * (1.0 + g["beta"] * (T_h - g["T_ref"])) if has_beta else g["K0"]
         if rec:
             fr, cog, ld = torque_terms(w, th)
-            vals = dict(time=k * T * tpp, current_command=i_ref, current=iq_m, position=th_m, velocity=w_hat,
+            kr = j if rec_all else k
+            vals = dict(time=j * T, current_command=i_ref, current=iq_m, position=th_m, velocity=w_f,
                         bus_voltage=V_bus, voltage_q=v_q, i_q=i_q, i_d=i_d, omega=w, theta=th, T_w=T_w, T_h=T_h,
                         tau_friction=fr, tau_cogging=cog, tau_load=ld, tau_em=K * i_q, v_d=v_d,
                         R=R, K=K, p_elec=p_el, p_joule=R * (i_d * i_d + i_q * i_q), v_limit=V_lim,
-                        current_d=id_m)
+                        current_d=id_m, velocity_estimate=w_hat)
             for name, val in vals.items():
-                out[:, row[name], k] = val
+                out[:, row[name], kr] = val
         for _ in range(sub):
             d2 = 0.5 * h
             k1 = deriv(i_d, i_q, w, th, va, vb, R, K)
@@ -378,7 +414,7 @@ def _kernel_numpy(par: np.ndarray, ref: np.ndarray, fast: np.ndarray, n_rec: int
 #: rows the kernels write, per recording sample
 KERNEL_ROWS = ("time", "current_command", "current", "position", "velocity", "bus_voltage", "voltage_q",
                "i_q", "i_d", "omega", "theta", "T_w", "T_h", "tau_friction", "tau_cogging", "tau_load", "tau_em",
-               "v_d", "R", "K", "p_elec", "p_joule", "v_limit", "current_d")
+               "v_d", "R", "K", "p_elec", "p_joule", "v_limit", "current_d", "velocity_estimate")
 
 
 # ---- C kernel: same equations, scalar loop, compiled on first use (gcc/cc), called through ctypes -----
@@ -434,6 +470,7 @@ def _c_library():
 
 
 def _kernel_c(par: np.ndarray, ref: np.ndarray, fast: np.ndarray, n_rec: int) -> np.ndarray:
+    """One recording: ``n_rec`` joint-controller steps → (len(KERNEL_ROWS), samples)."""
     import ctypes
 
     lib = _c_library()
@@ -441,7 +478,8 @@ def _kernel_c(par: np.ndarray, ref: np.ndarray, fast: np.ndarray, n_rec: int) ->
     par = np.ascontiguousarray(par, dtype=float)
     ref = np.ascontiguousarray(ref, dtype=float)
     fast = np.ascontiguousarray(fast, dtype=float)
-    out = np.zeros((len(KERNEL_ROWS), n_rec))
+    n_out = n_rec * int(par[PARAM_NAMES.index("ticks_per_pos")]) if par[PARAM_NAMES.index("rec_all")] else n_rec
+    out = np.zeros((len(KERNEL_ROWS), n_out))
     lib.truth_kernel(par.ctypes.data_as(dp), ref.ctypes.data_as(dp), fast.ctypes.data_as(dp), n_rec,
                      out.ctypes.data_as(dp))
     return out
@@ -474,13 +512,20 @@ def _finish(spec: TruthSpec, raw: np.ndarray, slow: np.ndarray) -> dict[str, np.
 
 
 def simulate(specs: list[TruthSpec], refs: list[Reference], *, backend: str = "auto", workers: int = 2,
-             progress: Callable[[int, int], None] | None = None) -> list[dict[str, np.ndarray]]:
-    """Simulate each (spec, reference) pair; return per recording a dict of 1 kHz columns
-    (``COLUMNS``) and noise-free internal signals ``true_*`` (motor side, SI).
+             progress: Callable[[int, int], None] | None = None,
+             post: Callable[[int, dict], dict] | None = None,
+             timings: list | None = None) -> list[dict[str, np.ndarray]]:
+    """Simulate each (spec, reference) pair; return per recording a dict of columns (``COLUMNS``) and noise-free
+    internal signals ``true_*`` (motor side, SI), one sample per joint-controller step (every current-loop tick
+    with ``drive.record_ticks``).
 
     ``backend``: ``"c"`` (compiled kernel, recordings spread over ``workers`` threads), ``"numpy"``
     (reference kernel, all recordings as one batch; slow) or ``"auto"`` (C when a compiler works).
-    ``progress(done, total)`` is called after each recording (C backend)."""
+    ``progress(done, total)`` is called after each recording (C backend). ``post(i, recording)``, when given,
+    transforms recording ``i`` as soon as it is simulated (e.g. a logger's decimation: a 30-minute run at 1 kHz
+    need not stay in memory until the whole batch is done). ``timings``, when given (a list as long as
+    ``specs``), receives each recording's simulation time [s] (C backend: per recording, in its worker thread;
+    numpy: the batch time shared equally)."""
     if len(specs) != len(refs) or not specs:
         raise ValueError("simulate: need one reference per spec")
     for s, r in zip(specs, refs):
@@ -491,11 +536,17 @@ def simulate(specs: list[TruthSpec], refs: list[Reference], *, backend: str = "a
     if backend == "c" and _c_library() is None:
         raise RuntimeError("C kernel unavailable")
 
+    import time
+
     def one(i):
+        t0 = time.perf_counter()
         spec, ref = specs[i], refs[i]
         slow, fast = _noise(spec, ref.n)
         raw = _kernel_c(param_vector(spec), np.stack([ref.theta_out, ref.omega_out, ref.alpha_out]), fast, ref.n)
-        return _finish(spec, raw, slow)
+        rec = _finish(spec, raw, slow)
+        if timings is not None:
+            timings[i] = time.perf_counter() - t0
+        return post(i, rec) if post is not None else rec
 
     if backend == "c":
         from concurrent.futures import ThreadPoolExecutor
@@ -511,11 +562,16 @@ def simulate(specs: list[TruthSpec], refs: list[Reference], *, backend: str = "a
     if backend != "numpy":
         raise ValueError(f"backend: expected auto, c or numpy, got {backend!r}")
     if len({r.n for r in refs}) != 1 or len({s.drive.current_loop_rate for s in specs}) != 1 \
-            or len({s.plant_substeps for s in specs}) != 1:
-        raise ValueError("numpy backend: a batch must share reference length, loop rate and sub-steps")
+            or len({s.plant_substeps for s in specs}) != 1 or len({s.drive.record_ticks for s in specs}) != 1:
+        raise ValueError("numpy backend: a batch must share reference length, loop rate, sub-steps and "
+                         "record_ticks")
     n = refs[0].n
+    t0 = time.perf_counter()
     noises = [_noise(s, n) for s in specs]
     raw = _kernel_numpy(np.stack([param_vector(s) for s in specs]),
                         np.stack([np.stack([r.theta_out, r.omega_out, r.alpha_out]) for r in refs]),
                         np.stack([f for _, f in noises]), n)
-    return [_finish(s, raw[i], noises[i][0]) for i, s in enumerate(specs)]
+    recs = [_finish(s, raw[i], noises[i][0]) for i, s in enumerate(specs)]
+    if timings is not None:
+        timings[:] = [(time.perf_counter() - t0) / len(specs)] * len(specs)
+    return [post(i, r) for i, r in enumerate(recs)] if post is not None else recs

@@ -4,7 +4,7 @@
 #include <math.h>
 
 #define G(name) par[I_##name]
-#define OUT(name, k) out[(long)R_##name * n_rec + (k)]
+#define OUT(name, k) out[(long)R_##name * n_out + (k)]
 
 typedef struct { const double *par; int has_cog[3]; } Ctx;
 
@@ -47,11 +47,14 @@ int truth_kernel(const double *par, const double *ref, const double *fast, long 
     const int sub = (int)G(sub), tpp = (int)G(ticks_per_pos);
     const double h = T / sub, p = G(p);
     const long n_ticks = n_rec * tpp;
+    const int rec_all = G(rec_all) != 0.0;          /* record every current-loop tick */
+    const long n_out = rec_all ? n_ticks : n_rec;
+    const int filt = G(a_vf) < 1.0;                 /* first-order low-pass on the reported speed */
     double i_d = 0, i_q = 0, w = 0, th = ref[0] * G(N);
-    double T_w = G(T_w0), T_h = G(T_h0), z_d = 0, z_q = 0, th_hat = th, w_hat = 0, i_ref = 0;
+    double T_w = G(T_w0), T_h = G(T_h0), z_d = 0, z_q = 0, th_hat = th, w_hat = 0, w_f = 0, i_ref = 0;
     double V_bus = G(V_s), p_el = 0;
     const int enc = G(q_enc) > 0.0;
-    long k = 0;
+    long k = 0, kr = 0;
     for (long j = 0; j < n_ticks; ++j) {
         double th_m = enc ? nearbyint(th / G(q_enc)) * G(q_enc) : th;
         /* true phase currents: inverse Park then inverse Clarke */
@@ -67,11 +70,13 @@ int truth_kernel(const double *par, const double *ref, const double *fast, long 
         double e = th_m - th_hat;
         th_hat += T * (w_hat + G(k1_pll) * e);
         w_hat += T * G(k2_pll) * e;
-        int rec = (j % tpp) == 0;
-        if (rec) {
+        w_f = filt ? w_f + G(a_vf) * (w_hat - w_f) : w_hat;   /* the speed the drive reports */
+        int step = (j % tpp) == 0;
+        int rec = step || rec_all;
+        if (step) {
             k = j / tpp;
             double th_r = ref[k], w_r = ref[n_rec + k], a_r = ref[2 * n_rec + k];
-            double tau = G(kp_out) * (th_r - th_m / G(N_nom)) + G(kd_out) * (w_r - w_hat / G(N_nom))
+            double tau = G(kp_out) * (th_r - th_m / G(N_nom)) + G(kd_out) * (w_r - w_f / G(N_nom))
                        + G(J_ff_out) * a_r + G(ff_const) + G(ff_g) * sin(th_r + G(ff_gph))
                        + G(ff_c) * tanh(w_r / 0.05);
             i_ref = tau / (G(N_nom) * G(K_nom));
@@ -97,6 +102,9 @@ int truth_kernel(const double *par, const double *ref, const double *fast, long 
         if (G(aw) == 1.0) {             /* conditional integration */
             if (!(v_d != u_d && e_d * u_d > 0)) z_d += G(Ki_i) * T * e_d;
             if (!(v_q != u_q && e_q * u_q > 0)) z_q += G(Ki_i) * T * e_q;
+        } else if (G(aw) == 2.0) {      /* none: the integrator winds up */
+            z_d += G(Ki_i) * T * e_d;
+            z_q += G(Ki_i) * T * e_q;
         } else {                        /* back-calculation */
             z_d += G(Ki_i) * T * e_d + (v_d - u_d);
             z_q += G(Ki_i) * T * e_q + (v_q - u_q);
@@ -109,13 +117,15 @@ int truth_kernel(const double *par, const double *ref, const double *fast, long 
         if (rec) {
             double fr, cog, ld;
             torque_terms(&ctx, w, th, &fr, &cog, &ld);
-            OUT(time, k) = k * T * tpp; OUT(current_command, k) = i_ref; OUT(current, k) = iq_m;
-            OUT(position, k) = th_m; OUT(velocity, k) = w_hat; OUT(bus_voltage, k) = V_bus;
-            OUT(voltage_q, k) = v_q; OUT(i_q, k) = i_q; OUT(i_d, k) = i_d; OUT(omega, k) = w;
-            OUT(theta, k) = th; OUT(T_w, k) = T_w; OUT(T_h, k) = T_h; OUT(tau_friction, k) = fr;
-            OUT(tau_cogging, k) = cog; OUT(tau_load, k) = ld; OUT(tau_em, k) = K * i_q; OUT(v_d, k) = v_d;
-            OUT(R, k) = R; OUT(K, k) = K; OUT(p_elec, k) = p_el; OUT(p_joule, k) = R * (i_d * i_d + i_q * i_q);
-            OUT(v_limit, k) = V_lim; OUT(current_d, k) = id_m;
+            kr = rec_all ? j : k;
+            OUT(time, kr) = j * T; OUT(current_command, kr) = i_ref; OUT(current, kr) = iq_m;
+            OUT(position, kr) = th_m; OUT(velocity, kr) = w_f; OUT(bus_voltage, kr) = V_bus;
+            OUT(voltage_q, kr) = v_q; OUT(i_q, kr) = i_q; OUT(i_d, kr) = i_d; OUT(omega, kr) = w;
+            OUT(theta, kr) = th; OUT(T_w, kr) = T_w; OUT(T_h, kr) = T_h; OUT(tau_friction, kr) = fr;
+            OUT(tau_cogging, kr) = cog; OUT(tau_load, kr) = ld; OUT(tau_em, kr) = K * i_q; OUT(v_d, kr) = v_d;
+            OUT(R, kr) = R; OUT(K, kr) = K; OUT(p_elec, kr) = p_el; OUT(p_joule, kr) = R * (i_d * i_d + i_q * i_q);
+            OUT(v_limit, kr) = V_lim; OUT(current_d, kr) = id_m;
+            OUT(velocity_estimate, kr) = w_hat;
         }
         for (int s = 0; s < sub; ++s) {
             double d2 = 0.5 * h, a1, b1, c1, a2, b2, c2, a3, b3, c3, a4, b4, c4;
