@@ -116,11 +116,21 @@ class Decimator:
         return (np.abs(m - 1.0) < 0.01) & valid_raw[self.idx] & ~self.edge
 
 
+#: the band [Hz] a joint's commanded motion occupies (gait, swings): the default low-pass never cuts below it
+MOTION_BAND_HZ = 5.0
+
+#: below this many samples per period of :data:`MOTION_BAND_HZ` the speed comes from an aligned velocity channel,
+#: not from central differences of the angle (20: 0.4 % attenuation)
+CENTRAL_DIFFERENCE_MIN_RATIO = 20.0
+
+
 def choose_filter(fs: float, fc: float | None = None) -> tuple[float, int]:
     """Cut-off [Hz] and decimation factor: default cut-off ``min(0.1 fs, 100 Hz)`` (well above the
-    mechanical dynamics, well below the current loop), decimated rate about 4 x cut-off."""
+    mechanical dynamics, well below the current loop), but not below ``min(0.4 fs, MOTION_BAND_HZ)``: a coarse
+    log (10 Hz) holds motion up to a few hertz, which a cut-off at 0.1 fs would remove from both sides of every
+    equation (and from the states the replay starts from); decimated rate about 4 x cut-off."""
     if fc is None:
-        fc = min(0.1 * fs, 100.0)
+        fc = max(min(0.1 * fs, 100.0), min(0.4 * fs, MOTION_BAND_HZ))
     fc = float(min(fc, 0.4 * fs))
     q = max(1, int(fs / (4.0 * fc)))
     return fc, q
@@ -454,7 +464,10 @@ def _derive(ctx: Context) -> None:
         th = raw["position"].copy()
         for a, b in segs:
             d = np.diff(th[a:b])
-            if len(d) and np.max(np.abs(d)) > 0.9 * math.pi:   # wrapped angle
+            if "velocity" in have:      # a coarse log of fast motion moves > pi per sample: only unexplained jumps
+                v = raw["velocity"][a:b]
+                d = d - 0.5 * (v[1:] + v[:-1]) * np.diff(t[a:b])
+            if len(d) and np.nanmax(np.abs(d)) > 0.9 * math.pi:   # wrapped angle
                 th[a:b] = np.unwrap(th[a:b])
                 ctx.notes.append("position was wrapped; unwrapped per segment")
                 break
@@ -482,6 +495,16 @@ def _derive(ctx: Context) -> None:
             msg = f"velocity taken from the position channel (central differences)"
             if abs(lag) > 0.25 / ctx.fs:
                 msg += f"; the velocity channel lags it by {1e3 * lag:.2f} ms"
+            elif ctx.fs < CENTRAL_DIFFERENCE_MIN_RATIO * MOTION_BAND_HZ:
+                # a coarse log: the difference over +-1 sample attenuates the motion band (6 % for a 1 Hz gait
+                # at 10 Hz, several times a resistance change's voltage); an aligned velocity channel does not
+                S["omega"] = raw["velocity"]
+                ctx.valid["omega"] = ctx.valid["velocity"]
+                f_m = min(MOTION_BAND_HZ, 0.1 * ctx.fs)
+                x = 2 * math.pi * f_m / ctx.fs
+                msg = (f"velocity taken from the velocity channel as recorded (aligned with the position's within a "
+                       f"quarter sample): at {ctx.fs:.4g} Hz central differences of the angle attenuate "
+                       f"{f_m:.3g} Hz motion by {100 * (1 - math.sin(x) / x):.0f} %")
             ctx.notes.append(msg)
     elif "velocity" in have:
         S["omega"] = raw["velocity"]
@@ -504,10 +527,14 @@ def _derive(ctx: Context) -> None:
         S["omega_s"] = ctx.dec.lowpass(w, fc_s)
         if ctx.steady:
             noise = 0.0
-        else:   # white-noise level in the smoothed speed, from the part above the cut-off
+        else:   # white-noise level in the smoothed speed, from the part above the cut-off ...
             hi = w - S["omega_s"]
             x = 2.0 * fc_s / ctx.fs
             noise = float(np.std(hi)) * math.sqrt(x / max(1.0 - x, 1e-3))
+            # ... or from the top fifth of the band alone, when that is quieter: on a coarse log (10 Hz, cut-off
+            # 1 Hz) the motion itself reaches above the cut-off and is not noise (white noise gives both the same)
+            top = w - ctx.dec.lowpass(w, 0.4 * ctx.fs)
+            noise = min(noise, float(np.std(top)) * math.sqrt(x / 0.2))
         spread = float(np.percentile(np.abs(S["omega_s"]), 90)) if n else 1.0
         ctx.omega_eps = max(2.0 * noise, 1e-3 * spread, 1e-6)
     # currents

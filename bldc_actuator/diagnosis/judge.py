@@ -80,8 +80,8 @@ def simulate_findings(ctx, sel, pars, lib, starts: list[int], window_s: float, z
     speed_scale = _speed_scale(ctx, starts, window_s)
     diverges = math.isfinite(speed_scale) and float(np.mean(w_full["velocity"])) > speed_scale
     for e, r, p_without in zip(effects, res[1:], sets[1:]):
-        if p_without == full:   # no simulator term (e.g. a current-dependent angle ripple): cannot be judged here
-            out[e] = {"verdict": "not simulated", "channel": None}
+        if p_without == full:   # the simulated actuator cannot hold it: no term, or a value outside its field
+            out[e] = {"verdict": "not simulated", "channel": None, "reason": _why_not_simulated(pars.get(e, {}))}
             continue
         eqs = [q for q in lib[e].equations if q in _CHANNEL]
         ch = _CHANNEL[eqs[0]] if eqs else "velocity"
@@ -114,6 +114,17 @@ def simulate_findings(ctx, sel, pars, lib, starts: list[int], window_s: float, z
             if math.isfinite(loss) and loss > floor:
                 out[e]["verdict"] = "worsens the simulated temperature"
     return out
+
+
+def _why_not_simulated(p: dict[str, dict]) -> str:
+    """Why a finding left the simulated actuator's parameters unchanged (plain words for the report)."""
+    out_of_range = [f"{k} = {v['value']:.4g} {v.get('unit', '')}".rstrip() for k, v in p.items()
+                    if not k.startswith("_") and isinstance(v.get("value"), (int, float)) and not v.get("field")
+                    and v.get("delta") is not None]
+    if out_of_range:
+        return (f"the fitted {', '.join(out_of_range)} has no place in the simulated actuator (outside what its "
+                f"parameter can hold): the simulator cannot reproduce it, so it cannot be shown to help")
+    return "the simulated actuator has no term for this form: it cannot be shown to help in simulation"
 
 
 #: the simulation can judge a channel only where it reproduces the recording at all: with every finding, the

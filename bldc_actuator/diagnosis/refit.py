@@ -8,7 +8,9 @@
   as not simulated.
 * :func:`replay` — multiple shooting: the recording cut into short windows, each simulated by the
   :class:`~bldc_actuator.model.BatchActuator` (all windows and parameter sets in ONE batch) from the state
-  measured at the window start, driven by the recorded commands and load; current, speed and angle errors.
+  measured at the window start, driven by the recorded commands and load (interpolated between the samples of
+  a log slower than the joint controller); current, speed, angle and q-voltage errors (the voltage at the
+  recorded speed: the mechanical replay's back-EMF error removed).
 * :func:`thermal_error` — the two-node thermal network driven by the measured current vs recorded
   temperatures.
 """
@@ -401,6 +403,17 @@ def simulate_windows(ctx: Context, param_sets: list[ActuatorParams], starts: lis
             "meas_v": meas_v, "idx": idx}
 
 
+#: a log slower than this [Hz] holds samples of commands that changed between them (the joint controller runs
+#: at 1 kHz or faster): the replay interpolates them linearly over sub-steps of at most 1 / this
+REPLAY_HOLD_RATE = 500.0
+
+
+def replay_substeps(fs: float) -> int:
+    """Sub-steps per recorded sample: 1 (the recorded command held, as the drive held it) at or above
+    :data:`REPLAY_HOLD_RATE`; below it, linear interpolation between samples over steps of <= 1 / that rate."""
+    return 1 if fs >= REPLAY_HOLD_RATE else int(math.ceil(REPLAY_HOLD_RATE / fs))
+
+
 def _simulate_batch(ctx: Context, plist: list[ActuatorParams], st: np.ndarray, L: int, i_meas: np.ndarray,
                     cmd: np.ndarray, load: np.ndarray | None) -> dict:
     """One :class:`BatchActuator` over windows starting at ``st`` (one parameter set per column), driven by the
@@ -430,11 +443,16 @@ def _simulate_batch(ctx: Context, plist: list[ActuatorParams], st: np.ndarray, L
     sensed = any(p.drive.current_sensor_offset_a or p.drive.current_sensor_offset_b
                  or p.drive.current_sensor_gain_a != 1.0 or p.drive.current_sensor_gain_b != 1.0 for p in plist)
     out = {k: np.zeros((L, len(plist))) for k in ("sim_i", "sim_w", "sim_th", "sim_v", "sim_id")}
+    n_sub = replay_substeps(ctx.fs)
+    last = len(cmd) - 1
     for k in range(L):
-        b.set_current_command(cmd[st + k])
-        if load is not None:
-            b.set_load_torque(load[st + k])
-        b.step(dt)
+        a, z = st + k, np.minimum(st + k + 1, last)
+        for j in range(n_sub):
+            f = (j + 0.5) / n_sub if n_sub > 1 else 0.0
+            b.set_current_command(cmd[a] + f * (cmd[z] - cmd[a]))
+            if load is not None:
+                b.set_load_torque(load[a] + f * (load[z] - load[a]))
+            b.step(dt / n_sub)
         # the current the drive's sensors report (what the recording holds), not the true winding current
         if sensed:
             o = b.outputs()
@@ -442,9 +460,12 @@ def _simulate_batch(ctx: Context, plist: list[ActuatorParams], st: np.ndarray, L
         else:
             i = b.field("i")
             out["sim_i"][k], out["sim_id"][k] = i.imag, i.real
-        out["sim_w"][k] = b.field("omega")
+        out["sim_w"][k] = w_sim = b.field("omega")
         out["sim_th"][k] = b.field("theta")
-        out["sim_v"][k] = b.field("v").imag          # the drive's q voltage: where voltage-side effects show
+        # the drive's q voltage, where voltage-side effects show, at the RECORDED speed: the back-EMF of the
+        # mechanical replay's speed error, K (omega_sim - omega_rec), is the velocity channel's error, not the
+        # electrical one's (at 10 Hz it is several times a resistance change's voltage)
+        out["sim_v"][k] = b.field("v").imag - K * (w_sim - w_meas[np.minimum(st + k + 1, last)])
     return out
 
 

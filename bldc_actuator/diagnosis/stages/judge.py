@@ -19,16 +19,42 @@ from ..candidates import SPECIAL
 from ..selection import forward_select
 from .data import Judgement, Say, Search
 
-#: simulated verdicts that keep a finding
-_KEEP = ("confirmed", "not simulated", "not checkable in simulation")
+#: simulated verdicts that keep a finding ("not simulated" does not: with the gate on, a finding the simulated
+#: actuator cannot hold — no term for its form, or a fitted value outside its parameter — cannot be shown to help)
+_KEEP = ("confirmed", "not checkable in simulation")
+
+#: rounds of judging: a refused finding changes the others' fitted values, which are judged again
+_ROUNDS = 3
 
 
 def _refuse(verdicts: list, effect: str, v: dict, unit: str, say: Say) -> None:
-    verdicts.append(significance.Verdict(effect, "not_confirmed_in_simulation",
-                                         f"{effect}: {v['verdict']} (held-out simulated {v.get('channel') or ''} "
-                                         f"error {v['without']:.3g} -> {v['with']:.3g}{unit}, noise floor "
-                                         f"{v['noise_floor']:.2g}{unit})"))
+    if "without" in v:
+        msg = (f"{effect}: {v['verdict']} (held-out simulated {v.get('channel') or ''} error {v['without']:.3g} -> "
+               f"{v['with']:.3g}{unit}, noise floor {v['noise_floor']:.2g}{unit})")
+    else:
+        msg = f"{effect}: {v['verdict']} ({v.get('reason', 'no simulated verdict')})"
+    verdicts.append(significance.Verdict(effect, "not_confirmed_in_simulation", msg))
     say(f"5/6 judge: {verdicts[-1].message}")
+
+
+def _harmful(v: dict) -> bool:
+    """A refused finding whose simulation is worse with it than without it beyond the noise floor (or that cannot
+    be simulated at all)."""
+    if "without" not in v or str(v["verdict"]).startswith("worsens"):
+        return True
+    floor = v.get("noise_floor")
+    return v.get("with") is not None and v["with"] - v["without"] > (floor if floor == floor and floor else 0.0)
+
+
+def _significance(ctx, lib, pars: dict, special_findings: list, options) -> list:
+    """Practical significance and identifiability of the linear findings' values and the special findings."""
+    claimed = dict(pars)
+    for f in special_findings:
+        claimed[f["effect"]] = {k: {"value": v, "sd": f["uncertainty"].get(k), "field": f["fields"].get(k)}
+                                for k, v in f["parameters"].items()}
+    experiments = {n: next(iter(c.confusable.values()), "") for n, c in lib.items() if c.confusable}
+    return significance.judge(claimed, ctx.params, tolerance=options.tolerance,
+                              max_relative_uncertainty=options.max_relative_uncertainty, experiments=experiments)
 
 
 def _refit_linear(s: Search, sel):
@@ -55,13 +81,7 @@ def run(s: Search, options, say: Say) -> Judgement:
     # practical significance and identifiability, before the final fit and the parameter file
     ff = refit.final_fit(ctx, sel)
     pars = refit.effect_parameters(ctx, sel, ff, lib)
-    claimed = dict(pars)
-    for f in special["findings"]:
-        claimed[f["effect"]] = {k: {"value": v, "sd": f["uncertainty"].get(k), "field": f["fields"].get(k)}
-                                for k, v in f["parameters"].items()}
-    experiments = {n: next(iter(c.confusable.values()), "") for n, c in lib.items() if c.confusable}
-    verdicts = significance.judge(claimed, ctx.params, tolerance=options.tolerance,
-                                  max_relative_uncertainty=options.max_relative_uncertainty, experiments=experiments)
+    verdicts = _significance(ctx, lib, pars, special["findings"], options)
     dropped = {v.effect for v in verdicts}
     if dropped:
         if any(a.effect in dropped for a in sel.accepted):
@@ -71,14 +91,32 @@ def run(s: Search, options, say: Say) -> Judgement:
         for v in verdicts:
             say(f"5/6 judge: {v.message}")
 
-    # equation-error findings: held-out simulated error with and without each (leave one out)
-    sim = judge.simulate_findings(ctx, sel, pars, lib, starts, win, tolerance=options.tolerance) if simulate else {}
-    refused = {e for e, v in sim.items() if v["verdict"] not in _KEEP}
-    if options.simulation_gate and refused:
+    # equation-error findings: held-out simulated error with and without each (leave one out). A refused finding
+    # moves the others' fitted values (correlated columns): those are judged again, significance and simulation
+    sim: dict = {}
+    for _ in range(_ROUNDS):
+        if not (simulate and sel.accepted):
+            break
+        round_sim = judge.simulate_findings(ctx, sel, pars, lib, starts, win, tolerance=options.tolerance)
+        sim.update(round_sim)
+        refused = {e for e, v in round_sim.items() if v["verdict"] not in _KEEP}
+        if not (options.simulation_gate and refused):
+            break
+        # a finding that makes the simulation worse also spoils the others' leave-one-out comparison (it is in
+        # every "with" set): when some do, only those go in this round and the rest are judged again without them
+        harmful = {e for e in refused if _harmful(round_sim[e])}
+        refused = harmful or refused
         for e in sorted(refused):
-            _refuse(verdicts, e, sim[e], "", say)
+            _refuse(verdicts, e, round_sim[e], "", say)
         sel.accepted = [a for a in sel.accepted if a.effect not in refused]
         ff, pars = _refit_linear(s, sel)
+        again = _significance(ctx, lib, pars, [], options)
+        if again:
+            verdicts += again
+            for v in again:
+                say(f"5/6 judge: {v.message}")
+            sel.accepted = [a for a in sel.accepted if a.effect not in {v.effect for v in again}]
+            ff, pars = _refit_linear(s, sel)
     params_linear, notes, not_sim = refit.updated_params(ctx, sel, pars, lib)
 
     # thermal network: full-length thermal simulation of the model with the linear findings (leave one out)
