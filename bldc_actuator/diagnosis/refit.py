@@ -714,14 +714,13 @@ def voltage_saturation_check(ctx: Context, lib: dict[str, Candidate], gate, want
     S, p = ctx.sig, ctx.params
     m = p.motor
     cmd, _ = _commands(ctx)
-    lag = 0
     lp_i = ctx.dec.lowpass(S["i_q"])
     best = None
-    for k in range(0, 6):
+    for k in range(0, 6):      # the command aligned with the current it produced (0-5 samples later)
         c = np.concatenate([np.full(k, cmd[0]), cmd[: len(cmd) - k]]) if k else cmd
         e = float(np.mean((lp_i - ctx.dec.lowpass(c)) ** 2))
         if best is None or e < best[0]:
-            best, lag = (e, c), k
+            best = (e, c)
     cmd = best[1]
     w = S["omega_s"]
     v_max = S["v_max"]
