@@ -62,6 +62,49 @@ def test_a_coarse_log_is_replayed_with_interpolated_commands():
     assert refit.replay_substeps(10.0) == 50
 
 
+def _coarse_signals(fs: float, wrap: bool):
+    """A 1 Hz swing of the rotor (amplitude 40 rad/s: up to 4 rad per 10 Hz sample), position and velocity
+    channels, optionally with the position wrapped to [-pi, pi)."""
+    from bldc_actuator.diagnosis.signals import Signals
+
+    t = np.arange(0.0, 60.0, 1.0 / fs)
+    w = 40.0 * np.cos(2 * np.pi * t)
+    th = 40.0 / (2 * np.pi) * np.sin(2 * np.pi * t) + 0.3 * t
+    pos = (th + np.pi) % (2 * np.pi) - np.pi if wrap else th
+    i = 2.0 + 0.5 * np.sin(2 * np.pi * t)
+    return Signals(t, {"position": pos, "velocity": w, "current": i, "current_command": i}, source="synthetic"), th
+
+
+def test_fast_motion_on_a_coarse_log_is_not_taken_for_a_wrapped_angle():
+    from bldc_actuator.params import ActuatorParams
+
+    sig, th = _coarse_signals(10.0, wrap=False)
+    ctx = ee.prepare([(sig, False)], ActuatorParams())
+    assert not any("wrapped" in n for n in ctx.notes)
+    assert np.allclose(ctx.sig["theta"], th)            # moved > 0.9 pi per sample, left as recorded
+    # the speed is the aligned velocity channel, not central differences of the angle (6 % short at 1 Hz)
+    assert np.allclose(ctx.sig["omega"], sig.channels["velocity"])
+    assert any("velocity channel as recorded" in n for n in ctx.notes)
+
+    # a real wrap is still unwrapped, whole turns only where the velocity says the angle did not go (np.unwrap
+    # would take the shorter way round on every sample that moved more than pi), in every segment
+    wrapped, th = _coarse_signals(10.0, wrap=True)
+    ctx = ee.prepare([(wrapped, False), (wrapped, True)], ActuatorParams())
+    assert any("wrapped" in n for n in ctx.notes)
+    n = len(th)
+    for a in (0, n):
+        assert np.allclose(np.diff(ctx.sig["theta"][a:a + n]), np.diff(th), atol=1e-9)
+
+
+def test_the_speed_noise_scale_of_a_coarse_log_is_not_its_motion():
+    from bldc_actuator.params import ActuatorParams
+
+    sig, _ = _coarse_signals(10.0, wrap=False)
+    ctx = ee.prepare([(sig, False)], ActuatorParams())
+    # noise-free: the smoothing scale is set by the 1e-3 x spread floor, not by the 40 rad/s swing
+    assert ctx.omega_eps < 0.01 * 40.0
+
+
 @needs_c
 @pytest.mark.slow
 def test_a_finding_the_simulator_cannot_hold_does_not_pass_the_gate(tmp_path):

@@ -464,13 +464,20 @@ def _derive(ctx: Context) -> None:
         th = raw["position"].copy()
         for a, b in segs:
             d = np.diff(th[a:b])
-            if "velocity" in have:      # a coarse log of fast motion moves > pi per sample: only unexplained jumps
-                v = raw["velocity"][a:b]
-                d = d - 0.5 * (v[1:] + v[:-1]) * np.diff(t[a:b])
-            if len(d) and np.nanmax(np.abs(d)) > 0.9 * math.pi:   # wrapped angle
-                th[a:b] = np.unwrap(th[a:b])
-                ctx.notes.append("position was wrapped; unwrapped per segment")
-                break
+            jump = np.abs(d) > 0.9 * math.pi
+            step = None
+            if "velocity" in have and jump.any():   # a coarse log of fast motion moves > pi per sample: a wrap
+                v = raw["velocity"][a:b]            # is a jump the velocity channel does not explain
+                step = 0.5 * (v[1:] + v[:-1]) * np.diff(t[a:b])
+                jump &= ~(np.abs(d - step) <= 0.9 * math.pi)
+            if jump.any():   # wrapped angle
+                if step is None:
+                    th[a:b] = np.unwrap(th[a:b])
+                else:       # whole turns removed where the velocity says the angle did not go (np.unwrap would
+                    turns = np.where(np.isfinite(step), np.round((d - step) / (2 * math.pi)), 0.0)   # take < pi)
+                    th[a:b] = th[a] + np.concatenate([[0.0], np.cumsum(d - 2 * math.pi * turns)])
+                if "position was wrapped; unwrapped per segment" not in ctx.notes:
+                    ctx.notes.append("position was wrapped; unwrapped per segment")
         S["theta"] = th
         ctx.valid["theta"] = ctx.valid["position"]
     use_pos = "position" in have and not ctx.steady
