@@ -27,6 +27,7 @@ sys.path.insert(0, str(REPO))
 
 from benchmarks.concealed import cases as C  # noqa: E402
 from benchmarks.concealed import truth as T  # noqa: E402
+from concealed_helpers import diagnose_case  # noqa: E402
 
 from bldc_actuator.diagnosis import equation_error as ee  # noqa: E402
 from bldc_actuator.diagnosis import refit  # noqa: E402
@@ -35,16 +36,7 @@ needs_c = pytest.mark.skipif(T._c_library() is None, reason="no C compiler for t
 
 
 def _diagnose(case, tmp_path, **opts):
-    from bldc_actuator.diagnosis import cleaning, loaders
-    from bldc_actuator.diagnosis.pipeline import DiagnoseOptions, diagnose
-
-    d = tmp_path / case.name
-    if not (d / "train.csv").exists():
-        C.generate([case], tmp_path, workers=2)
-    p = C.nominal_params(case)
-    tr = cleaning.clean(loaders.load(d / "train.csv", params=p), params=p)
-    ho = cleaning.clean(loaders.load(d / "heldout.csv", params=p), params=p)
-    return diagnose(tr, p, options=DiagnoseOptions(holdout_signals=ho, progress=False, **opts)).to_dict()
+    return diagnose_case(case, tmp_path, **opts).to_dict()
 
 
 def test_the_default_low_pass_keeps_the_motion_band_of_a_coarse_log():

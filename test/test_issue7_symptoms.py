@@ -27,20 +27,13 @@ sys.path.insert(0, str(REPO))
 
 from benchmarks.concealed import cases as C  # noqa: E402
 from benchmarks.concealed import truth as T  # noqa: E402
+from concealed_helpers import diagnose_case  # noqa: E402
 
 pytestmark = pytest.mark.skipif(T._c_library() is None, reason="no C compiler for the truth generator")
 
 
 def _diagnose(case, tmp_path):
-    from bldc_actuator.diagnosis import cleaning, loaders
-    from bldc_actuator.diagnosis.pipeline import DiagnoseOptions, diagnose
-
-    C.generate([case], tmp_path, workers=2)
-    d = tmp_path / case.name
-    p = C.nominal_params(case)
-    tr = cleaning.clean(loaders.load(d / "train.csv", params=p), params=p)
-    ho = cleaning.clean(loaders.load(d / "heldout.csv", params=p), params=p)
-    rep = diagnose(tr, p, options=DiagnoseOptions(holdout_signals=ho, progress=False)).to_dict()
+    rep = diagnose_case(case, tmp_path).to_dict()
     return rep, json.loads(json.dumps(rep, default=float))
 
 
@@ -73,17 +66,9 @@ def test_symptom1_no_false_alarm_when_the_simulation_cannot_follow_a_100hz_log(t
     case = replace(C.get_case("null_thermal_100hz"), train=C.Excitation("gait", 60.0, 41, {"amplitude": 0.35}),
                    heldout=C.Excitation("gait", 30.0, 42, {"amplitude": 0.3, "freq": 0.9}),
                    environment={"pll_bandwidth": 20.0})
-    from bldc_actuator.diagnosis import cleaning, loaders
-    from bldc_actuator.diagnosis.pipeline import DiagnoseOptions, diagnose
-
-    C.generate([case], tmp_path, workers=2)
-    d = tmp_path / case.name
-    p = C.nominal_params(case)
-    tr = cleaning.clean(loaders.load(d / "train.csv", params=p), params=p)
-    ho = cleaning.clean(loaders.load(d / "heldout.csv", params=p), params=p)
-    eq_only = diagnose(tr, p, options=DiagnoseOptions(holdout_signals=ho, progress=False, simulation_gate=False))
+    eq_only = diagnose_case(case, tmp_path, simulation_gate=False)
     assert len(eq_only.findings) >= 2                  # the false alarms, as reported
-    rep = diagnose(tr, p, options=DiagnoseOptions(holdout_signals=ho, progress=False)).to_dict()
+    rep = diagnose_case(case, tmp_path).to_dict()
     assert rep["findings"] == [] and rep["nothing_missing"]
     assert "does not reproduce" in rep["verdict"]
     assert {f["effect"] for f in eq_only.findings} <= {r["effect"] for r in rep["rejected"]}
@@ -130,16 +115,8 @@ def test_symptom5_sensor_offset_ripple_is_written_back_and_simulated(tmp_path):
     """An order-p electrical-angle ripple from current-sensor offsets was 'named but not simulated': now the
     offsets are written to drive.current_sensor_offset_a/_b, the simulated controller acts on them and the
     replay compares the simulated SENSOR current with the recorded one."""
-    from bldc_actuator.diagnosis import cleaning, loaders
-    from bldc_actuator.diagnosis.pipeline import DiagnoseOptions, diagnose
-
     case = C.get_case("electrical_ripple")
-    C.generate([case], tmp_path, workers=2)
-    d = tmp_path / case.name
-    p = C.nominal_params(case)
-    tr = cleaning.clean(loaders.load(d / "train.csv", params=p), params=p)
-    ho = cleaning.clean(loaders.load(d / "heldout.csv", params=p), params=p)
-    rep = diagnose(tr, p, options=DiagnoseOptions(holdout_signals=ho, progress=False))
+    rep = diagnose_case(case, tmp_path)
     doc = rep.to_dict()
     assert [f["effect"] for f in doc["findings"]] == ["electrical_angle_ripple"]
     assert doc["findings"][0]["simulation"]["verdict"] == "confirmed"

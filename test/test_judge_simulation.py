@@ -20,20 +20,13 @@ sys.path.insert(0, str(REPO))
 
 from benchmarks.concealed import cases as C  # noqa: E402
 from benchmarks.concealed import truth as T  # noqa: E402
+from concealed_helpers import case_recordings, diagnose_case  # noqa: E402
 
 pytestmark = pytest.mark.skipif(T._c_library() is None, reason="no C compiler for the truth generator")
 
 
 def _diagnose(case, tmp_path, **opts):
-    from bldc_actuator.diagnosis import cleaning, loaders
-    from bldc_actuator.diagnosis.pipeline import DiagnoseOptions, diagnose
-
-    C.generate([case], tmp_path, workers=2)
-    d = tmp_path / case.name
-    p = C.nominal_params(case)
-    tr = cleaning.clean(loaders.load(d / "train.csv", params=p), params=p)
-    ho = cleaning.clean(loaders.load(d / "heldout.csv", params=p), params=p)
-    return diagnose(tr, p, options=DiagnoseOptions(holdout_signals=ho, progress=False, **opts)).to_dict()
+    return diagnose_case(case, tmp_path, **opts).to_dict()
 
 
 @pytest.mark.slow
@@ -59,18 +52,13 @@ def test_the_simulator_replaces_a_load_equation_error_preferred_by_the_simpler_f
     """arbitrate_aliases on the old symptom, built directly: a selection that named position_dependent_load
     (sin/cos of the angle + constant) with the friction asymmetry as its alias. Both replay the held-out windows
     alike, so the form with fewer parameters replaces it."""
-    from bldc_actuator.diagnosis import cleaning, judge, loaders
+    from bldc_actuator.diagnosis import judge
     from bldc_actuator.diagnosis.candidates import SPECIAL
     from bldc_actuator.diagnosis.pipeline import DiagnoseOptions
     from bldc_actuator.diagnosis.selection import forward_select
     from bldc_actuator.diagnosis.stages import search
 
-    case = C.reseeded(C.get_case("asymmetric"), 1)
-    C.generate([case], tmp_path, workers=2)
-    d = tmp_path / case.name
-    p = C.nominal_params(case)
-    tr = cleaning.clean(loaders.load(d / "train.csv", params=p), params=p)
-    ho = cleaning.clean(loaders.load(d / "heldout.csv", params=p), params=p)
+    tr, ho, p = case_recordings(C.reseeded(C.get_case("asymmetric"), 1), tmp_path)
     opts = DiagnoseOptions(holdout_signals=ho, progress=False)
     s = search.run(tr, p, opts, lambda m: None)
     names = [n for n in s.names if n not in SPECIAL]
