@@ -499,7 +499,7 @@ def _derive(ctx: Context) -> None:
         if "velocity" in have:
             lag = _lag(ctx, raw["velocity"], S["omega"])
             S["velocity_channel_lag"] = np.array(lag)
-            msg = f"velocity taken from the position channel (central differences)"
+            msg = "velocity taken from the position channel (central differences)"
             if abs(lag) > 0.25 / ctx.fs:
                 msg += f"; the velocity channel lags it by {1e3 * lag:.2f} ms"
             elif ctx.fs < CENTRAL_DIFFERENCE_MIN_RATIO * MOTION_BAND_HZ:
@@ -780,7 +780,6 @@ def fit_columns(ctx: Context, cols: dict[str, dict[str, np.ndarray]], keys: list
     residuals on every decimated sample so held-out errors follow without refitting.
     """
     blocks = blocks or list(ctx.blocks)
-    ho = ctx.holdout_dec
     Xs, Zs, ys, parts = [], [], [], []
     use_iv = False
     for eq in blocks:
