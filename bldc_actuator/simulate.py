@@ -68,6 +68,19 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
+def simulate_profile(params: ActuatorParams | str | Path, profile: profiles.Profile, *,
+                     rate: float | None = 1000.0) -> SimResult:
+    """Run ``profile`` through a fresh :class:`Actuator` of ``params`` (ActuatorParams, or a preset name or
+    parameter file for :func:`~bldc_actuator.params.load_preset`); every signal sampled at ``rate`` [Hz]
+    whatever the profile's own rows (``None``: at the profile's samples). What ``bldc-actuator simulate``
+    computes."""
+    if not isinstance(params, ActuatorParams):
+        params = load_preset(params)
+    if rate is not None and not (rate > 0 and np.isfinite(rate)):
+        raise ValueError(f"rate: expected > 0 Hz, got {rate!r}")
+    return Actuator(params).run(profile, record_every=None if rate is None else 1.0 / rate)
+
+
 def load_params(args) -> ActuatorParams:
     if args.params:
         return load_yaml(args.params)
