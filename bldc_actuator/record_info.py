@@ -140,7 +140,9 @@ def report(summary: dict[str, Any], out: TextIO) -> None:
         for key in keys:
             symbol = SYMBOLS.get(key, "")
             w(f"  {key:<{kw}}  {_value(key, params[key]):<22} {symbol}\n".rstrip() + "\n")
-    meta = {k: v for k, v in summary["metadata"].items() if k != "recorder" and v != ""}
+    # a robot's joint_name metadata is the first joint's: the per-joint table above says whose is whose
+    hidden = {"recorder", "joint_name"} if len(joints) > 1 else {"recorder"}
+    meta = {k: v for k, v in summary["metadata"].items() if k not in hidden and v != ""}
     if meta:
         w("Metadata:\n")
         for key, value in meta.items():

@@ -144,7 +144,7 @@ def test_record_info_lists_each_joints_parameters(ros_context, ros_executor, tmp
              **{f"joint.{j}.preset": p for j, p in PRESETS.items()}}, lambda t: [0.1, 0.0, 0.0])
     assert cli.main(["record-info", str(path)]) == 0
     text = capsys.readouterr().out
-    assert "recorded for 3 joints (hip, knee, ankle)" in text
+    assert "recorded for 3 joints (hip, knee, ankle)" in text and "joint_name:" not in text
     header = next(line for line in text.splitlines() if line.strip().startswith("parameter "))
     assert header.split() == ["parameter", *JOINTS]
     row = next(line for line in text.splitlines() if line.strip().startswith("motor.torque_constant_q"))
