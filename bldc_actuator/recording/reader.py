@@ -39,7 +39,7 @@ Reading
     empty with ``keep_messages=False``), ``stats`` {channel id: [count, first_ns, last_ns, sequence gaps,
     times the log time went backwards, last sequence]}, ``metadata`` [(name, dict)] in file order,
     ``finalized``, ``profile``, ``library``, ``issues``, ``file_size``, ``complete_bytes``. The building
-    block of the readers below, and of readers of other formats that need the raw CDR (the diagnosis).
+    block of read_recording and summarize, and of readers that need the raw CDR (the diagnosis).
 """
 
 from __future__ import annotations
