@@ -11,8 +11,15 @@ set +e
 # (BLDC_ACTUATOR_NO_NUMBA=1). A full run (no test paths, -k or -m given) first runs the physics test files on
 # that pure-Python path too, so every physics test runs on both paths.
 both=1
+paths=0
+prev=""
 for a in "$@"; do
     case "$a" in -k|-m|*test*|*::*) both=0 ;; esac
+    # a test path (not the value of an option such as -k EXPR): pytest runs that alone
+    case "$prev" in -k|-m|-n|-p|-c|-o|--*=) ;; *)
+        case "$a" in -*) ;; test*|*/test*|*::*|*.py) paths=1 ;; esac ;;
+    esac
+    prev="$a"
 done
 rc=0
 if [[ $both == 1 && "${BLDC_TEST_PYTHON_KERNEL:-1}" != 0 ]]; then
@@ -22,7 +29,12 @@ if [[ $both == 1 && "${BLDC_TEST_PYTHON_KERNEL:-1}" != 0 ]]; then
     rc=$?
     echo "test.sh: full suite (compiled kernel)"
 fi
-"$VENV/bin/python" -m pytest test "$@"
+# test paths given: run those only; otherwise the whole suite
+if [[ $paths == 1 ]]; then
+    "$VENV/bin/python" -m pytest "$@"
+else
+    "$VENV/bin/python" -m pytest test "$@"
+fi
 rc2=$?
 [[ $rc -eq 0 ]] && rc=$rc2
 set -e
