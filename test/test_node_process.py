@@ -62,6 +62,15 @@ def test_bad_parameter_exits_with_a_clear_message(tmp_path):
     assert "Traceback" not in result.stderr
 
 
+def test_unknown_top_level_parameter_exits_2_naming_the_nearest():
+    """``-p presett:=ak80_9`` (a typo of ``preset``) must not run the built-in motor: exit 2, named."""
+    result = subprocess.run([str(venv_script()), "--ros-args", "-p", "presett:=ak80_9"],
+                            env=env_for(), capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2, result.stdout + result.stderr
+    assert "presett" in result.stderr and "did you mean 'preset'" in result.stderr
+    assert "Traceback" not in result.stderr
+
+
 @pytest.mark.parametrize("sig, executor", [(signal.SIGINT, "single"), (signal.SIGTERM, "single"),
                                            (signal.SIGINT, "events"), (signal.SIGTERM, "events")])
 def test_signal_finalizes_the_recording(tmp_path, sig, executor):
