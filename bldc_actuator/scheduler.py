@@ -49,9 +49,9 @@ DERATE_ERROR_FRACTION = 0.5
 MAX_BATCH_WALL_NS = 20_000_000
 #: one console line per rejection reason per this wall time [ns]; the ones held back are counted
 LOG_THROTTLE_NS = 1_000_000_000
-#: a joint's level flapping between the same two levels is logged at most once per this wall time [ns]
-#: (the changes in between are counted in the next line)
-LEVEL_LOG_THROTTLE_NS = 10_000_000_000
+#: at most one console line per joint about its diagnostics level per this wall time [ns]: a level that
+#: flaps is logged as it stands once this has passed (with the number of changes), never left stale
+LEVEL_LOG_MIN_NS = 1_000_000_000
 #: commands interfaces of ``~/commands``: what one element means
 COMMANDS_INTERFACES = {"effort": "torque", "current": "current"}
 
@@ -97,6 +97,9 @@ class JointCommand:
     win_saturated: int = 0
     win_rejected: int = 0
     level: int = OK                     # level of the last diagnostics
+    logged_level: int = OK              # level of the last console line about it
+    level_logged_ns: int | None = None  # wall time of that line
+    level_changes: int = 0              # level changes since that line
     current_abs_max: float = math.inf   # |command| limits (absurd beyond), A and N*m at the output
     torque_abs_max: float = math.inf
 
@@ -182,7 +185,6 @@ class Scheduler:
         #: when a list: (ideal wall time, wall time after publication) [ns] of every period the clock advanced
         self.timing: list[tuple[int, int]] | None = None
         self._throttle = Throttle(LOG_THROTTLE_NS, clock)
-        self._level_throttle = Throttle(LEVEL_LOG_THROTTLE_NS, clock)
         self._next_diag_ns = self.t_ns
         self._next_detail_ns = self.t_ns
         self._watchdog_check_ns: int | None = None   # earliest simulation time a watchdog can fire
@@ -487,26 +489,26 @@ class Scheduler:
         if wall > self._win_wall0 and self.t_ns > self._win_sim0:
             self.real_time_factor = (self.t_ns - self._win_sim0) / (wall - self._win_wall0)
         result = [self._joint_health(j, o, error, values or {}) for j, o in zip(self.joints, outs)]
-        changes: dict[tuple, list[JointCommand]] = {}   # the same change of several joints: one line
+        lines: dict[tuple, list[JointCommand]] = {}   # the same change of several joints: one line
         for j, h in zip(self.joints, result):
             if h.level != j.level:
-                changes.setdefault((j.level, h.level, h.message), []).append(j)
                 j.level = h.level
-        for (old, new, message), joints in changes.items():
-            self._log_level(joints, old, new, message)
+                j.level_changes += 1
+            if j.level != j.logged_level and (j.level_logged_ns is None
+                                              or wall - j.level_logged_ns >= LEVEL_LOG_MIN_NS):
+                lines.setdefault((j.logged_level, h.level, h.message), []).append(j)
+        for (old, new, message), joints in lines.items():
+            self._log_level(joints, old, new, message, max(j.level_changes for j in joints))
+            for j in joints:
+                j.logged_level, j.level_logged_ns, j.level_changes = new, wall, 0
         self._win_periods = self._win_slips = 0
         for j in self.joints:
             j.win_saturated = j.win_rejected = 0
         self._win_wall0, self._win_sim0 = wall, self.t_ns
         return result
 
-    def _log_level(self, joints: list[JointCommand], old: int, new: int, message: str) -> None:
-        key = (tuple(j.name for j in joints), min(old, new), max(old, new))
-        allowed, held = self._level_throttle.allow(key)
-        if not allowed:
-            return
-        more = (f" (changed {held} more time(s) between {LEVEL_NAMES[old]} and {LEVEL_NAMES[new]} in the "
-                f"last {LEVEL_LOG_THROTTLE_NS * 1e-9:g} s)") if held else ""
+    def _log_level(self, joints: list[JointCommand], old: int, new: int, message: str, changes: int) -> None:
+        more = f" ({changes} level changes since the last line)" if changes > 1 else ""
         who = ", ".join(j.name for j in joints) if self.config.name_joints else "actuator"
         text = f"diagnostics {who}: {LEVEL_NAMES[old]} -> {LEVEL_NAMES[new]}: {message}{more}"
         # one call site per severity (rclpy's logger keys its state by call site)
