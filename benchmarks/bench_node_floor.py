@@ -138,7 +138,7 @@ def measure(cmd: list[str], label: str, args) -> dict:
         spy = None
         if args.py_spy and label == "node" and not args.py_spy_done:
             args.py_spy_done = True
-            spy = subprocess.Popen(["py-spy", "record", "--native", "-r", "500", "-d", str(int(args.seconds)),
+            spy = subprocess.Popen(["py-spy", "record", "--native", "-r", "200", "-d", str(int(args.seconds)),
                                     "-f", "raw" if args.py_spy.endswith(".txt") else "speedscope",
                                     "-o", args.py_spy, "-p", str(proc.pid)],
                                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)

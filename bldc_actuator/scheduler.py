@@ -402,14 +402,15 @@ class Scheduler:
             self.reject((j,), topic, "absurd", f"{kind} command{self._for(j)} {v:g} {unit} is absurd (more than "
                         f"{ABSURD_FACTOR:g} x drive.current_limit: |value| <= {limit:g} {unit})")
             return False
-        try:
-            if kind == "current":
-                self.plant.set_current_command(j.name, v)
-            else:
-                self.plant.set_torque_command(j.name, v)
-        except Exception as exc:  # noqa: BLE001 - the node never dies on a message
-            self.reject((j,), topic, "plant", f"{type(exc).__name__}: {exc}")
-            return False
+        if v != j.value or kind != j.kind or j.watchdog_active:   # (the same command again: the plant holds it)
+            try:
+                if kind == "current":
+                    self.plant.set_current_command(j.name, v)
+                else:
+                    self.plant.set_torque_command(j.name, v)
+            except Exception as exc:  # noqa: BLE001 - the node never dies on a message
+                self.reject((j,), topic, "plant", f"{type(exc).__name__}: {exc}")
+                return False
         j.kind, j.value = kind, v
         j.commands_received += 1
         self.commands_received += 1
