@@ -18,8 +18,9 @@ each a fresh process, measured after ``--warmup`` seconds for ``--seconds``: CPU
 the lateness of each message as the subscriber receives it (arrival time minus stamp, minus the run's
 smallest such difference: p50/p99/max; the node's stamps are simulation time, which real time ties to the
 steady clock), and the node's slips as its /diagnostics report them. The ratio node/floor is quoted per
-round (each node run against the floor run next to it) with its spread. The load average is printed: the
-machine is shared, so only the ratio of neighbouring runs means much.
+round (each node run against the floor run next to it) with its spread; a round where either process could not
+keep 1 kHz (slips, or fewer than 990 messages/s) is shown but not counted (a starved process does less work).
+The load average is printed: the machine is shared, so only the ratio of neighbouring runs means much.
 """
 
 from __future__ import annotations
@@ -204,7 +205,11 @@ def main() -> int:
                 if args.show_log and r["label"] == "node":
                     print("    " + r["log"].strip().replace("\n", "\n    "))
             f, n = (pair[0], pair[1]) if pair[0]["label"] == "floor" else (pair[1], pair[0])
-            ratios.append(n["cpu"] / f["cpu"])
+            starved = [r["label"] for r in (f, n) if r["slip_reports"] or r["rate"] < 990.0]
+            if starved:   # a process that could not keep 1 kHz did less work: its CPU is no measure
+                print(f"  round {k + 1}: {' and '.join(starved)} starved of CPU (slips or < 990 Hz): not counted")
+            else:
+                ratios.append(n["cpu"] / f["cpu"])
     finally:
         ctl.send_signal(signal.SIGINT)
         try:
@@ -212,6 +217,9 @@ def main() -> int:
         except subprocess.TimeoutExpired:
             ctl.kill()
     load1 = os.getloadavg()
+    if not ratios:
+        print("no round without starvation: the machine is too loaded for a figure")
+        return 1
     fl = [r["cpu"] for r in rows if r["label"] == "floor"]
     nd = [r["cpu"] for r in rows if r["label"] == "node"]
     print(f"floor CPU {min(fl) * 100:.1f}-{max(fl) * 100:.1f} %, node CPU {min(nd) * 100:.1f}-{max(nd) * 100:.1f} %; "

@@ -210,6 +210,9 @@ class ActuatorNode(Node):
         topic = nv["node.joint_commands_topic"]
         self.sub_joint_commands = self.create_subscription(JointState, topic, self._on_joint_commands, cq) \
             if topic else None
+        # resolved names, looked up once (a topic_name property call per message costs)
+        self._commands_topic = self.sub_commands.topic_name
+        self._joint_commands_topic = self.sub_joint_commands.topic_name if topic else ""
 
         # reusable messages (rclpy serialises at publish; reuse is safe): the JointState shares the
         # scheduler's position/velocity/effort arrays and the period stamp, so a period changes no field
@@ -387,7 +390,7 @@ class ActuatorNode(Node):
         """ros2_control ForwardCommandController convention: one value per joint, ``joints`` order."""
         self._record_in(self.sub_commands, msg)
         with self._lock:
-            self.scheduler.commands(msg.data, self.sub_commands.topic_name)
+            self.scheduler.commands(msg.data, self._commands_topic)
             self.scheduler.lock_step_period()
 
     def _on_joint_commands(self, msg: JointState) -> None:
@@ -396,7 +399,7 @@ class ActuatorNode(Node):
         self._record_in(self.sub_joint_commands, msg)
         with self._lock:
             self.scheduler.joint_commands(msg.name, msg.position, msg.velocity, msg.effort,
-                                          self.sub_joint_commands.topic_name)
+                                          self._joint_commands_topic)
             self.scheduler.lock_step_period()
 
     def _on_load(self, j: JointCommand, jt: JointTopics, msg: Float64) -> None:
