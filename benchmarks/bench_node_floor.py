@@ -100,6 +100,19 @@ def cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+def thread_cpu(pid: int) -> dict[str, float]:
+    """CPU seconds per thread name (``/proc/<pid>/task/*``; threads of one name summed)."""
+    out: dict[str, float] = {}
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        try:
+            name = (task / "comm").read_text().strip()
+            fields = (task / "stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        out[name] = out.get(name, 0.0) + (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    return out
+
+
 def pct(xs: list[float], q: float) -> float:
     if not xs:
         return float("nan")
@@ -123,18 +136,27 @@ def node_command(joints: int, extra: list[str]) -> list[str]:
             *ros, *extra]
 
 
+def niced(args):
+    """``preexec_fn`` giving a child the nice value ``--nice`` (the same for every process of the benchmark)."""
+    if not args.nice:
+        return None
+    return lambda: os.setpriority(os.PRIO_PROCESS, 0, args.nice)
+
+
 def measure(cmd: list[str], label: str, args) -> dict:
     env = child_env()
-    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            preexec_fn=niced(args))
     t_start = time.monotonic() + args.warmup
     t_stop = t_start + args.seconds
     sub = subprocess.Popen([sys.executable, "-c", SUBSCRIBER, repr(t_start), repr(t_stop)], env=env,
-                           stdout=subprocess.PIPE, text=True)
+                           stdout=subprocess.PIPE, text=True, preexec_fn=niced(args))
     try:
         time.sleep(max(0.0, t_start - time.monotonic()))
         if proc.poll() is not None:
             raise RuntimeError(f"{label} exited early: {proc.communicate()[0]}")
         c0 = cpu_seconds(proc.pid)
+        th0 = thread_cpu(proc.pid)
         w0 = time.monotonic()
         spy = None
         if args.py_spy and label == "node" and not args.py_spy_done:
@@ -145,6 +167,7 @@ def measure(cmd: list[str], label: str, args) -> dict:
                                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         time.sleep(max(0.0, t_stop - time.monotonic()))
         c1 = cpu_seconds(proc.pid)
+        th1 = thread_cpu(proc.pid)
         w1 = time.monotonic()
         if spy is not None:
             spy.wait(timeout=60)
@@ -163,7 +186,8 @@ def measure(cmd: list[str], label: str, args) -> dict:
     slips = sum("cannot keep" in d for d in r["diag"])
     return {"label": label, "cpu": (c1 - c0) / (w1 - w0), "rate": r["count"] / (w1 - w0),
             "late_p50": pct(late, 50), "late_p99": pct(late, 99), "late_max": late[-1] if late else float("nan"),
-            "slip_reports": slips, "warn": len(r["diag"]), "log": log}
+            "slip_reports": slips, "warn": len(r["diag"]), "log": log,
+            "threads": {k: (v - th0.get(k, 0.0)) / (w1 - w0) for k, v in th1.items() if v - th0.get(k, 0.0) > 0}}
 
 
 def main() -> int:
@@ -177,18 +201,24 @@ def main() -> int:
                     "(after its --ros-args), e.g. --node-arg=-p --node-arg=node.detail_rate:=100.0")
     ap.add_argument("--py-spy", metavar="OUT", help="profile the first node run with py-spy (on PATH) into OUT "
                     "(.txt: collapsed stacks, else speedscope JSON); its sampling adds to that run's CPU")
+    ap.add_argument("--nice", type=int, default=0, help="nice value of every process of the benchmark (floor, node, "
+                    "controller, subscriber alike; negative needs root): keeps a shared machine's other jobs from "
+                    "starving them")
+    ap.add_argument("--threads", action="store_true", help="print each process's CPU per thread")
     ap.add_argument("--show-log", action="store_true", help="print the node's console output")
     args = ap.parse_args()
     args.py_spy_done = False
     env = child_env()
-    ctl = subprocess.Popen([sys.executable, "-c", CONTROLLER, str(args.joints), str(args.command_rate)], env=env)
+    ctl = subprocess.Popen([sys.executable, "-c", CONTROLLER, str(args.joints), str(args.command_rate)], env=env,
+                           preexec_fn=niced(args))
     floor_cmd = [sys.executable, str(HERE / "floor_node.py"), "--joints", str(args.joints)]
     node_cmd = node_command(args.joints, args.node_arg)
     load0 = os.getloadavg()
     print(f"bench_node_floor: {os.cpu_count()} CPUs, load average {load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}; "
           f"{args.joints} joints (ak80_9), controller process at {args.command_rate:g} Hz on ~/commands, subscriber "
           f"process on joint_states + /diagnostics; EventsExecutor; {args.rounds} rounds of floor/node, "
-          f"{args.seconds:g} s each after {args.warmup:g} s warm-up; node extras: {' '.join(args.node_arg) or 'none'}")
+          f"{args.seconds:g} s each after {args.warmup:g} s warm-up; node extras: {' '.join(args.node_arg) or 'none'}; "
+          f"nice {args.nice}")
     rows, ratios = [], []
     try:
         for k in range(args.rounds):
@@ -202,6 +232,9 @@ def main() -> int:
                       f"{r['rate']:7.1f} Hz   lateness p50/p99/max {r['late_p50']:.3f}/{r['late_p99']:.3f}/"
                       f"{r['late_max']:.2f} ms   slip reports {r['slip_reports']}   non-OK diagnostics "
                       f"{r['warn']}", flush=True)
+                if args.threads:
+                    print("    threads: " + ", ".join(f"{k} {v * 100:.1f} %" for k, v in
+                                                      sorted(r["threads"].items(), key=lambda kv: -kv[1])))
                 if args.show_log and r["label"] == "node":
                     print("    " + r["log"].strip().replace("\n", "\n    "))
             f, n = (pair[0], pair[1]) if pair[0]["label"] == "floor" else (pair[1], pair[0])
