@@ -314,7 +314,7 @@ class ActuatorNode(Node):
 
     # ------------------------------------------------------------------------------------ publishing
 
-    def _on_period(self, t_ns: int, outs: list[dict], detail: bool, diag: bool) -> None:
+    def _on_period(self, t_ns: int, outs: list[dict] | None, detail: bool, diag: bool) -> None:
         stamp = self._stamp_now
         stamp.sec, stamp.nanosec = divmod(t_ns, 1_000_000_000)
         publish = self._publish
@@ -325,8 +325,11 @@ class ActuatorNode(Node):
             now = time.monotonic_ns()
             if now >= self._next_detail_refresh:
                 self._refresh_detail(now)
-            for k, pub, fill in self._detail_live:
-                publish(pub, fill(outs[k]), t_ns)
+            if self._detail_live:
+                if outs is None:   # (a subscriber appeared this period)
+                    outs = self.plant.all_outputs()
+                for k, pub, fill in self._detail_live:
+                    publish(pub, fill(outs[k]), t_ns)
         if diag:
             self._publish_diagnostics(outs, t_ns)
 
@@ -334,6 +337,7 @@ class ActuatorNode(Node):
         """The detail topics to publish: all while recording, else those with a subscriber (on demand)."""
         everything = self.recorder is not None
         self._detail_live = [d for d in self._detail_all if everything or d[1].get_subscription_count() > 0]
+        self.scheduler.detail_wanted = bool(self._detail_live)
         self._next_detail_refresh = now + DETAIL_REFRESH_NS
 
     def _publish(self, pub, msg, t_ns: int) -> None:
@@ -534,8 +538,9 @@ are ~/<joint>/...):
        per joint), ~/reset_fault (std_msgs/Empty, per joint), node.joint_commands_topic (sensor_msgs/JointState
        effort by joint name: ros2_control's topic_based hardware interface)
   out: node.joint_states_topic (joint_states: every joint), ~/phase_currents, ~/q_axis_state,
-       ~/winding_temperature, ~/housing_temperature (per joint, at node.detail_rate), /diagnostics (one status
-       per joint), /clock (node.publish_clock)
+       ~/winding_temperature, ~/housing_temperature (per joint, at node.detail_rate, on demand: only while
+       subscribed, or recording), /diagnostics (one status per joint; level changes are also logged),
+       /clock (node.publish_clock)
 
 Per-joint parameters: joint.<name>.preset, joint.<name>.params_file, joint.<name>.<model parameter>.
 
@@ -589,8 +594,8 @@ OWN_FLAGS = {"--record": "PATH", "--executor": "events|single"}
 def make_executor(kind: str | None = None, context=None):
     """``events`` (rclpy.experimental.EventsExecutor, ROS 2 Kilted+; the default where it exists) or
     ``single`` (SingleThreadedExecutor; the default on older ROS 2). Measured (benchmarks/bench_node.py,
-    12 joints at 1 kHz): events keeps 1000 Hz on a third of a core, single needs a whole one, and events makes
-    lock-step round trips about 5x faster."""
+    12 joints at 1 kHz): events needs about a third of the CPU single does, and makes lock-step round trips
+    several times faster."""
     if kind in (None, "events"):
         try:
             from rclpy.experimental import EventsExecutor

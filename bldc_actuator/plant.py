@@ -31,6 +31,13 @@ Also used by the scheduler (the default plant has them; another plant should too
                                                    load, ambient...); the state carries on
     ``reset_fault(joint) -> bool``                 clear a latched over-temperature trip; returns whether
                                                    one was latched
+Optional
+    ``joint_states() -> list[tuple]``              ``(position_out, velocity_out, effort_out,
+                                                   voltage_saturated)`` of every joint in ``joints`` order:
+                                                   all the scheduler needs on a period without diagnostics or
+                                                   wanted detail topics. Offer it only if it is cheaper than
+                                                   ``all_outputs()`` (the default plant does not: the public
+                                                   Actuator API has no cheaper read than ``outputs()``)
 
 Units are SI at this boundary (A, N*m, rad, s, ns for time); commands are finite floats (the scheduler
 rejects anything else before it reaches the plant).

@@ -144,7 +144,8 @@ class Scheduler:
     """Steps ``plant`` in periods of ``config.period_ns``; see the module docstring.
 
     ``on_period(t_ns, outputs, detail_due, diagnostics_due)`` is called after every period (the node
-    publishes there); :attr:`position`, :attr:`velocity`, :attr:`effort` (``array('d')``, ``plant.joints``
+    publishes there; ``outputs`` is ``plant.all_outputs()``, or None on a period where neither diagnostics
+    nor wanted details are due and the plant has the cheaper ``joint_states()``); :attr:`position`, :attr:`velocity`, :attr:`effort` (``array('d')``, ``plant.joints``
     order, output side) hold that period's joint state, updated in place (a message may share them).
     ``on_finished(t_ns)`` is called once when ``config.max_sim_ns`` is reached. ``clock`` is the wall clock
     [ns] (steady)."""
@@ -192,6 +193,10 @@ class Scheduler:
         self._win_wall0, self._win_sim0 = clock(), self.t_ns
         self._anchor_wall = self._anchor_sim = 0
         self._started = False
+        #: whether the per-joint detail topics want the full outputs on detail periods (the node clears it
+        #: while nothing subscribes to them)
+        self.detail_wanted = True
+        self._joint_states = getattr(plant, "joint_states", None)   # optional cheap read, see plant.py
 
     def share_joint_state(self, position: array.array, velocity: array.array, effort: array.array) -> None:
         """Write every period's joint state into these ``array('d')`` (one element per joint) from now on,
@@ -313,22 +318,31 @@ class Scheduler:
         if step > 0:
             plant.step_ns(step)
         self.t_ns = t = plant.t_ns
-        outs = self.outputs = plant.all_outputs()
-        pos, vel, eff = self.position, self.velocity, self.effort
-        for k, o in enumerate(outs):
-            pos[k] = o["position_out"]
-            vel[k] = o["velocity_out"]
-            eff[k] = o["effort_out"]
-            if o["voltage_saturated"]:
-                self.joints[k].win_saturated += 1
-        self.periods += 1
-        self._win_periods += 1
         detail = t >= self._next_detail_ns
         if detail:
             self._next_detail_ns = t - t % cfg.detail_period_ns + cfg.detail_period_ns
         diag = t >= self._next_diag_ns
         if diag:
             self._next_diag_ns = t - t % cfg.diag_period_ns + cfg.diag_period_ns
+        pos, vel, eff = self.position, self.velocity, self.effort
+        joints = self.joints
+        if self._joint_states is not None and not diag and not (detail and self.detail_wanted):
+            # a period nobody needs more than the joint state of: the plant's cheap read
+            outs = None
+            for k, (p, v, e, saturated) in enumerate(self._joint_states()):
+                pos[k], vel[k], eff[k] = p, v, e
+                if saturated:
+                    joints[k].win_saturated += 1
+        else:
+            outs = self.outputs = plant.all_outputs()
+            for k, o in enumerate(outs):
+                pos[k] = o["position_out"]
+                vel[k] = o["velocity_out"]
+                eff[k] = o["effort_out"]
+                if o["voltage_saturated"]:
+                    joints[k].win_saturated += 1
+        self.periods += 1
+        self._win_periods += 1
         if self.on_period is not None:
             self.on_period(t, outs, detail, diag)
         if cfg.max_sim_ns and t >= cfg.max_sim_ns and not self.finished:
