@@ -142,7 +142,7 @@ def run_free(context, executor_kind: str, seconds: float, time_factor: float, re
            "commands_per_s": received / wall / max(1, joints)}
     if 0 < time_factor < float("inf") and timing:
         late = np.array([done - ideal for ideal, done in timing]) * 1e-6
-        late -= late.min()   # the anchor sits half a period ahead of the wake-ups: relative lateness
+        late -= late.min()   # the anchor leads the wake-ups by a tenth of a period: relative lateness
         out.update(late_p50=pct(late, 50), late_p99=pct(late, 99), late_max=float(late.max()))
     return out
 

@@ -244,7 +244,7 @@ class ActuatorNode(Node):
                 self._start_timer()
 
     def _start_timer(self) -> None:
-        # created right after the anchor: the wake-ups fall half a period after each period became due
+        # created right after the anchor: the wake-ups fall a tenth of a period after each period became due
         self.scheduler.start()
         self._timer = self.create_timer(self.scheduler.wake_period_ns * 1e-9, self._on_tick, clock=self._steady)
 

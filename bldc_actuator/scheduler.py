@@ -5,8 +5,8 @@ parameters, messages, recording); benchmarks and tests drive a :class:`Scheduler
 Time
     :meth:`Scheduler.tick` (called by the node's steady-clock timer every :attr:`Scheduler.wake_period_ns`)
     advances the plant by whole periods (``period_ns``, one publication each) until simulation time has
-    caught up with ``time_factor`` x the wall time since the anchor. Simulation time is anchored half a
-    period ahead of the wake-ups, so each wake-up normally advances exactly one period. A wake-up that finds
+    caught up with ``time_factor`` x the wall time since the anchor. Simulation time is anchored a tenth of a
+    period ahead of the wake-ups, so each wake-up normally advances exactly one period, just after it fell due. A wake-up that finds
     more than ``max_batch_wall_ns`` of wall time due drops the debt (a *slip*: counted, reported WARN, never a
     burst). ``time_factor`` 0 or inf: as fast as possible, batches of periods of at most ``max_batch_wall_ns``
     wall time per wake-up. Lock-step: no timer; :meth:`lock_step_period` after each command message.
@@ -40,6 +40,8 @@ from .plant import Plant
 
 OK, WARN, ERROR = 0, 1, 2
 LEVEL_NAMES = ("OK", "WARN", "ERROR")
+#: simulation time is anchored 1/ANCHOR_LEAD of a wake-up period ahead of the wake-ups
+ANCHOR_LEAD = 10
 #: a command beyond this multiple of the drive's current limit (in current) is rejected as absurd;
 #: commands between 1x and this are accepted and limited by the drive like a real one would
 ABSURD_FACTOR = 10.0
@@ -229,9 +231,11 @@ class Scheduler:
         self._started = True
 
     def _anchor(self) -> None:
-        """Tie simulation time to the wall clock now, half a wake-up ahead (so wake-ups land mid-period)."""
+        """Tie simulation time to the wall clock now, a tenth of a wake-up ahead: a timer started right after
+        this fires a tenth of a period after each period fell due (timers never fire early), so every
+        wake-up finds exactly one period due and publishes it with little delay."""
         self._anchor_sim = self.t_ns
-        self._anchor_wall = self.clock() - (0 if self.as_fast_as_possible else self.wake_period_ns // 2)
+        self._anchor_wall = self.clock() - (0 if self.as_fast_as_possible else self.wake_period_ns // ANCHOR_LEAD)
 
     def set_time_factor(self, time_factor: float) -> None:
         """Change ``time_factor`` at run time (re-anchors; the caller re-times its wake-ups to
@@ -276,7 +280,7 @@ class Scheduler:
             self._win_slips += 1
             n = limit
             self._anchor_sim = self.t_ns + limit * cfg.period_ns
-            self._anchor_wall = now - self.wake_period_ns // 2
+            self._anchor_wall = now - self.wake_period_ns // ANCHOR_LEAD
         timing = self.timing
         for _ in range(n):
             self._advance_period()
