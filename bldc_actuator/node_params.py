@@ -78,7 +78,8 @@ NODE_PARAMS: dict[str, NodeParam] = {p.name: p for p in (
               "commands, joints matched by name, effort = output torque [N*m] (ros2_control's topic_based "
               "hardware interface publishes /robot_joint_command); empty = off"),
     NodeParam("node.detail_rate", float, 0.0, "Hz", "rate (per second of simulation time) of the per-joint "
-              "~/[<joint>/]q_axis_state, phase_currents and temperatures; 0 = every publish period",
+              "~/[<joint>/]q_axis_state, phase_currents and temperatures; 0 = every publish period (published on "
+              "demand: only while subscribed, and always while recording)",
               (0.0, 100000.0)),
 )}
 
