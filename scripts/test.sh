@@ -5,21 +5,29 @@
 #                                                    ROS domain-id range, see test/conftest.py)
 #        bash scripts/test.sh -m "not slow"
 set -euo pipefail
-source "$(dirname "${BASH_SOURCE[0]}")/env.sh"
+CALLER_DIR="$PWD"
+source "$(dirname "${BASH_SOURCE[0]}")/env.sh"   # (cd's to the repository)
 set +e
+# test paths given relative to the caller's directory stay the caller's; without any, the whole test/ tree
+args=()
+paths=0
+for a in "$@"; do
+    p="${a%%::*}"
+    if [[ "$a" != -* && "$a" != /* && -e "$CALLER_DIR/$p" ]]; then
+        args+=("$CALLER_DIR/$a"); paths=1
+    elif [[ "$a" != -* && -e "$p" ]]; then
+        args+=("$a"); paths=1
+    else
+        args+=("$a")
+    fi
+done
+[[ $paths == 1 ]] || args=(test "${args[@]}")
 # The physics kernel is compiled with numba; the same source also runs as plain Python
 # (BLDC_ACTUATOR_NO_NUMBA=1). A full run (no test paths, -k or -m given) first runs the physics test files on
 # that pure-Python path too, so every physics test runs on both paths.
 both=1
-paths=0
-prev=""
 for a in "$@"; do
     case "$a" in -k|-m|*test*|*::*) both=0 ;; esac
-    # a test path (not the value of an option such as -k EXPR): pytest runs that alone
-    case "$prev" in -k|-m|-n|-p|-c|-o|--*=) ;; *)
-        case "$a" in -*) ;; test*|*/test*|*::*|*.py) paths=1 ;; esac ;;
-    esac
-    prev="$a"
 done
 rc=0
 if [[ $both == 1 && "${BLDC_TEST_PYTHON_KERNEL:-1}" != 0 ]]; then
@@ -29,12 +37,7 @@ if [[ $both == 1 && "${BLDC_TEST_PYTHON_KERNEL:-1}" != 0 ]]; then
     rc=$?
     echo "test.sh: full suite (compiled kernel)"
 fi
-# test paths given: run those only; otherwise the whole suite
-if [[ $paths == 1 ]]; then
-    "$VENV/bin/python" -m pytest "$@"
-else
-    "$VENV/bin/python" -m pytest test "$@"
-fi
+"$VENV/bin/python" -m pytest "${args[@]}"
 rc2=$?
 [[ $rc -eq 0 ]] && rc=$rc2
 set -e
