@@ -15,7 +15,8 @@ of alert, each with its evidence; one alert record per series that raises any of
                  From three recordings. ``F^2 = max(1, B^2)`` is the over-dispersion of the stated
                  uncertainties (Birge ratio): ``B^2 = sum chi^2 / sum dof`` of the weighted straight-line fits
                  of every series of that parameter in the fleet (``D = sum dof``; a series whose own fit is
-                 not a straight line at p < 1e-4 -- a step -- is left out of the pool). When the stated
+                 not a straight line at p < 1e-4 against the fleet's median scatter -- a step -- is left
+                 out of the pool). When the stated
                  uncertainties are honest (B^2 <= 1) the test is a z-test with them; when recordings scatter
                  more than stated, the scatter is measured on the fleet and the t quantile pays for its
                  estimation. FALSE-ALARM RATE: ``alpha`` per series and run (default 0.001) for stable
@@ -111,15 +112,21 @@ def line_fit(t: np.ndarray, v: np.ndarray, u: np.ndarray) -> dict[str, float]:
 
 
 def overdispersion(series: list[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> tuple[float, int, int]:
-    """(B^2, pooled dof, series pooled) over series (t, v, u) of one parameter (see the module docstring)."""
+    """(B^2, pooled dof, series pooled) over series (t, v, u) of one parameter (see the module docstring).
+
+    Two steps, so that one step-like series cannot set the scatter of the whole fleet: a robust first
+    estimate (median over series of chi^2 / median of chi^2(dof)), then the pooled sum over the series whose
+    chi^2 / B0^2 is not beyond the p = 1e-4 tail of chi^2(dof)."""
     from scipy.stats import chi2 as chi2d
 
+    fits = [line_fit(t, v, u) for t, v, u in series if len(v) >= 3]
+    fits = [f for f in fits if f["dof"] > 0]
+    if not fits:
+        return 1.0, 0, 0
+    b0 = float(np.median([f["chi2"] / chi2d.median(f["dof"]) for f in fits]))
     tot, dof, used = 0.0, 0, 0
-    for t, v, u in series:
-        if len(v) < 3:
-            continue
-        f = line_fit(t, v, u)
-        if chi2d.sf(f["chi2"], f["dof"]) < POOL_EXCLUDE_P:
+    for f in fits:
+        if b0 > 0 and chi2d.sf(f["chi2"] / b0, f["dof"]) < POOL_EXCLUDE_P:
             continue
         tot += f["chi2"]
         dof += f["dof"]

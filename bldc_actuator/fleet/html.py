@@ -152,7 +152,7 @@ def write(path, rows: list[dict], ev: dict[str, Any], failures: list[dict], summ
         f"{len({f['recording'] for f in failures})} file(s) failed, {summary.get('recordings_with_data_issues', 0)} "
         f"with data issues; {summary.get('seconds', 0):.1f} s on {summary.get('workers', '?')} worker(s) "
         f"({e(str(summary.get('scheduler', '')))}). Off nominal: the latest value more than the tolerance "
-        f"({100 * opt.get('default_tolerance', 0.1):.0g} % unless set per parameter) and more than "
+        f"({100 * opt.get('default_tolerance', 0.1):.0f} % unless set per parameter) and more than "
         f"{opt.get('k_sigma', 5):g} combined sd from the {e(opt.get('reference', 'nominal'))}; drifting: weighted "
         f"straight line through the recordings' values and their sd, false-alarm rate {opt.get('alpha', 1e-3):g} "
         f"per actuator and parameter; shifted: baseline vs recent median (>= 8 recordings).</small></p>")
