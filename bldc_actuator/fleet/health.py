@@ -30,13 +30,14 @@ Estimator (well defined, the same for every recording):
    plus the always-fitted nuisance columns, each equation weighted by 1/robust std of its nominal training
    residual. The joint fit keeps friction from absorbing a K_t change and vice versa.
 3. Values = nominal + fitted change, mapped by each candidate's own ``to_params``; uncertainty = the
-   fit's standard deviation (covariance inflated by the residual's correlation time).
-4. Held-out before/after per parameter: held-out RMS of that parameter's equation with the other
-   tracked parameters fitted and this one at nominal (before) vs all fitted (after).
+   larger of the fit's standard deviation (covariance inflated by the residual's correlation time) and the
+   time-cluster sandwich of :func:`cluster_covariance` (coloured, model-form residuals).
+4. Held-out before/after per parameter: held-out RMS of that parameter's equation, in its own unit, with the
+   other tracked parameters fitted and this one at nominal (before) vs all fitted (after).
 5. R_ha: 1-parameter nonlinear least squares of ``log(R_ha/R_ha,nom)`` on the training part of the
-   recorded temperatures simulated from the measured current (starting at the first recorded
-   temperatures; when only one of winding / housing is recorded, the other node's start temperature is
-   fitted too, as a nuisance); uncertainty from the Jacobian, inflated by the residual's correlation time; held-out =
+   recorded temperatures simulated from the measured current (both nodes' start temperatures
+   fitted as nuisances around the first recorded samples: a start pinned to one noisy sample biased R_ha by
+   up to 1 % at a stated 0.08 %); uncertainty from the Jacobian, inflated by the residual's correlation time; held-out =
    temperature RMS on the held-out blocks. Assumes the nominal ambient temperature (``thermal.
    ambient_temperature``) and the other thermal parameters; a warm actuator cooling (or heating) during the
    recording makes it identifiable.
@@ -175,10 +176,8 @@ def cluster_covariance(ctx, cols: dict, keys: list[str], weights: dict[str, floa
     n_cl = max(2, min(n_time // length, 200))
     if n_cl < min_clusters:
         n_cl = max(2, min(min_clusters, n_time // 2))
-    order = np.argsort(np.unique(i))
-    rank = np.searchsorted(np.unique(i), i)
+    rank = np.searchsorted(np.unique(i), i)          # time order of each row's sample (equations share it)
     g = (rank * n_cl) // max(1, n_time)
-    del order
     A = np.linalg.pinv(Z.T @ X)
     S = np.zeros((n_cl, len(keys)))
     np.add.at(S, g, Z * r[:, None])
