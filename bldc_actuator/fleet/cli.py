@@ -63,7 +63,8 @@ def write_table(rows: list[dict], out: Path) -> None:
 
     from .run import COLUMNS
 
-    floats = {"value", "uncertainty", "nominal", "heldout_before", "heldout_after"}
+    floats = {"value", "uncertainty", "nominal", "heldout_before", "heldout_after", "diagnose_value",
+              "diagnose_uncertainty"}
     rows = dedupe(rows)
     data = {}
     for c in COLUMNS:

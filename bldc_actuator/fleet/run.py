@@ -13,7 +13,8 @@ recording; ``finding``: a parameter of an effect ``diagnose`` accepted), ``effec
 ``value``, ``uncertainty`` (1 sigma), ``unit``, ``nominal``, ``heldout_before``, ``heldout_after``,
 ``heldout_metric``, ``accepted`` (``diagnose`` accepted this effect in this recording), ``diagnosis`` (what
 ``diagnose`` said about this parameter's effect in this recording: ``accepted: value +- sd``, ``rejected: why``,
-``suspected, not identifiable: why``; empty when it did not test it), ``status`` (``ok``; ``warning``: the value
+``suspected, not identifiable: why``; empty when it did not test it), ``diagnose_value``,
+``diagnose_uncertainty`` (the value +- sd ``diagnose`` fitted for this parameter when it accepted it), ``status`` (``ok``; ``warning``: the value
 stands but the recording has a data issue of :data:`SERIOUS_ISSUES`; ``not_checkable``, ``not_identifiable``,
 ``failed``), ``reason``, ``data_issues`` (every data issue of the recording, ``kind channel: detail``, also
 an unfinalized MCAP), ``profile`` (the input profile that read the file, given or auto-detected),
@@ -35,7 +36,7 @@ from typing import Any
 
 COLUMNS = ("recording", "joint", "actuator_id", "start_time", "start_time_source", "source", "effect",
            "parameter", "value", "uncertainty", "unit", "nominal", "heldout_before", "heldout_after",
-           "heldout_metric", "accepted", "diagnosis", "status", "reason", "data_issues", "profile", "params_file")
+           "heldout_metric", "accepted", "diagnosis", "diagnose_value", "diagnose_uncertainty", "status", "reason", "data_issues", "profile", "params_file")
 
 #: DataIssue kinds that make a recording's values less trustworthy: its rows get status ``warning``
 #: (``constant``: a fixed bus voltage or a joint at rest is listed in ``data_issues`` but is no warning)
@@ -239,13 +240,20 @@ def _rows(base: dict, tracked: list, report: dict | None, params) -> list[dict]:
     said = _diagnosis_by_effect(report)
     findings = (report or {}).get("findings", []) or []
     accepted = {f["effect"] for f in findings}
+    fitted = {}                     # parameter -> (value, sd) that diagnose accepted
+    for f in findings:
+        unc = f.get("uncertainty") or {}
+        for name, value in (f.get("parameters") or {}).items():
+            if isinstance(value, (int, float)) and not isinstance(value, bool):
+                fitted.setdefault(name, (_f(value), _f(unc.get(name))))
     rows, names = [], set()
     for t in tracked:
+        dv, du = fitted.get(t.parameter, (float("nan"), float("nan")))
         rows.append(dict(base, source="tracked", effect=t.effect, parameter=t.parameter, value=t.value,
                          uncertainty=t.uncertainty, unit=t.unit, nominal=t.nominal, heldout_before=t.heldout_before,
                          heldout_after=t.heldout_after, heldout_metric=t.heldout_metric,
-                         accepted=t.effect in accepted, diagnosis=said.get(t.effect, ""), status=t.status,
-                         reason=t.reason))
+                         accepted=t.effect in accepted, diagnosis=said.get(t.effect, ""), diagnose_value=dv,
+                         diagnose_uncertainty=du, status=t.status, reason=t.reason))
         names.add(t.parameter)
     flat = params.to_flat() if params is not None else {}
     for f in findings:
@@ -262,7 +270,8 @@ def _rows(base: dict, tracked: list, report: dict | None, params) -> list[dict]:
                              uncertainty=_f(unc.get(name)), unit=str(units.get(name, "")), nominal=nominal,
                              heldout_before=_f(ho.get("before")), heldout_after=_f(ho.get("after")),
                              heldout_metric=str(ho.get("metric", "")) + (f" [{ho['unit']}]" if ho.get("unit") else ""),
-                             accepted=True, diagnosis=said.get(f["effect"], ""), status="ok",
+                             accepted=True, diagnosis=said.get(f["effect"], ""), diagnose_value=_f(value),
+                             diagnose_uncertainty=_f(unc.get(name)), status="ok",
                              reason="" if fields.get(name) in flat else "no nominal field for this parameter"))
     return rows
 
