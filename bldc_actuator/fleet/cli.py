@@ -203,15 +203,21 @@ def main(args) -> int:
     html.write(out / "report.html", rows, ev, res.failures, summary)
     print(f"fleet: {recordings} recording x joint from {res.files} file(s) in {res.seconds:.1f} s "
           f"({summary['recordings_per_minute'] or 0:.1f} per minute, {res.workers} worker(s)); "
-          f"{len(res.failures)} failure(s); {len(issues)} with data issues; {len(ev['alerts'])} alert(s)")
+          f"{len(res.failures)} failure(s); {len(issues)} with data issues "
+          f"({len({r['recording'] for r in rows if r.get('status') == 'warning'})} with warnings); "
+          f"{len(ev['alerts'])} alert(s)")
     by_profile: dict[str, set] = {}
     for r in rows:
         by_profile.setdefault(r.get("profile") or "(own MCAP / canonical CSV)", set()).add(r["recording"])
     print("  input profiles: " + ", ".join(f"{k} x {len(v)}" for k, v in sorted(by_profile.items())))
     for a in ev["alerts"]:
         print(f"  ALERT {a['message']}")
-    for rec, joint, text in issues:
-        print(f"  DATA {rec}{' [' + str(joint) + ']' if joint else ''}: {text[:200]}")
+    warned = sorted({(r["recording"], str(r.get("joint") or ""), r.get("reason", "")) for r in rows
+                     if r.get("status") == "warning"})
+    for rec, joint, why in warned[:20]:
+        print(f"  WARNING {rec}{' [' + joint + ']' if joint else ''}: {why[:200]} (see data_issues)")
+    if len(warned) > 20:
+        print(f"  ... {len(warned) - 20} more recording(s) with warnings: {out / 'report.html'}")
     for f in res.failures:
         print(f"  FAILED {f['recording']}{' [' + str(f['joint']) + ']' if f.get('joint') else ''}: {f['error'][:200]}")
     print(f"wrote {out / 'fleet.parquet'}, {out / 'fleet.csv'}, {out / 'alerts.json'}, {out / 'report.html'}")

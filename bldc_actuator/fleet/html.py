@@ -165,16 +165,30 @@ def write(path, rows: list[dict], ev: dict[str, Any], failures: list[dict], summ
         out.append("</table>")
     else:
         out.append("<p>none</p>")
-    issues = sorted({(r["recording"], str(r.get("joint") or ""), r.get("data_issues", ""), r.get("status", ""))
-                     for r in rows if r.get("data_issues")})
-    out.append(f"<h2>Data issues ({len(issues)} recording(s))</h2>")
-    if issues:
-        out.append("<table><tr><th>recording</th><th>joint</th><th>issues</th></tr>")
-        for rec, joint, text, _ in issues:
-            out.append(f"<tr><td>{e(rec)}</td><td>{e(joint)}</td><td>{e(text[:600])}</td></tr>")
+    issues: dict[tuple[str, str], tuple[str, bool]] = {}
+    for r in rows:
+        if r.get("data_issues"):
+            k = (r["recording"], str(r.get("joint") or ""))
+            issues[k] = (r["data_issues"], issues.get(k, ("", False))[1] or r.get("status") == "warning")
+    warned = sorted(k for k, (_, w) in issues.items() if w)
+    other = [k for k in sorted(issues) if not issues[k][1]]
+    out.append(f"<h2>Data issues ({len(warned)} recording(s) with a warning, {len(other)} with remarks only)</h2>")
+    if warned:
+        out.append("<table><tr><th>recording</th><th>joint</th><th>issues (values kept, status warning)</th></tr>")
+        for k in warned:
+            out.append(f"<tr><td>{e(k[0])}</td><td>{e(k[1])}</td><td>{e(issues[k][0][:600])}</td></tr>")
         out.append("</table>")
     else:
-        out.append("<p>none</p>")
+        out.append("<p>no recording with a warning</p>")
+    if other:
+        kinds: dict[str, int] = {}
+        for k in other:
+            for part in issues[k][0].split(" | "):
+                head = part.split(":", 1)[0]
+                kinds[head] = kinds.get(head, 0) + 1
+        out.append("<p><small>remarks (no effect on the values): " +
+                   ", ".join(f"{e(h)} in {n} recording(s)" for h, n in sorted(kinds.items())) +
+                   "; every one in the table's data_issues column</small></p>")
     out.append("<h2>Actuators</h2><p><small>value ± 1 sd per recording; dashed: reference, grey band: tolerance, "
                "dotted red: limit; hollow: a recording with a data issue; red: alert.</small></p>")
     alerted = {a["actuator_id"] for a in alerts}

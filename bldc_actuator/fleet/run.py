@@ -157,7 +157,7 @@ def _process_joint(job: Job, joint, mapping) -> tuple[list[dict], list[dict]]:
     base = _base_row(job, joint, aid, when.isoformat(), when_src, pf)
     base["profile"] = raw.meta.get("profile") or job.profile or ""      # the input profile that read it
     issues = data_issues(sig)
-    base["data_issues"] = "; ".join(f"{k} {c}: {d}" for k, c, d in issues)
+    base["data_issues"] = " | ".join(f"{k} {c}: {d}" for k, c, d in issues)
     serious = sorted({k for k, _, _ in issues if k in SERIOUS_ISSUES})
     from ..diagnosis import torque_balance
 
