@@ -179,3 +179,14 @@ def test_tracked_uncertainty_covers_the_truth(coverage):
         assert zs.max() < 3.5, (key, np.round(zs, 1))
     allz = np.abs(np.concatenate([np.array(v) for v in coverage.values()]))
     assert np.median(allz) > 0.1, np.median(allz)
+
+
+def test_cli_rejects_bad_alert_options(tmp_path, capsys):
+    from bldc_actuator.cli import main
+
+    f = tmp_path / "a.csv"
+    f.write_text("t\n0\n")
+    for bad, word in ((["--limit", "coulomb_friction"], "--limit"), (["--tolerance", "x=abc"], "--tolerance"),
+                      (["--tolerance", "-0.5"], "--tolerance"), (["--k-sigma", "0"], "--k-sigma")):
+        assert main(["fleet", str(f), "--out", str(tmp_path / "o"), *bad]) == 2
+        assert word in capsys.readouterr().err
