@@ -98,6 +98,18 @@ def actuator_figure(aid: str, rows: list[dict], series: dict[str, dict]):
     return fig
 
 
+def verdicts(rows: list[dict]) -> dict[str, dict[str, int]]:
+    """parameter -> {diagnose's verdict (accepted, rejected, suspected, not identifiable, ...): recordings}."""
+    out: dict[str, dict[str, int]] = {}
+    for r in rows:
+        d = str(r.get("diagnosis") or "")
+        if d:
+            head = d.split(":", 1)[0].strip()
+            c = out.setdefault(r["parameter"], {})
+            c[head] = c.get(head, 0) + 1
+    return out
+
+
 def _alert_rows(alerts: list[dict]) -> list[str]:
     e = html.escape
     out = ["<table><tr><th>actuator</th><th>parameter</th><th>alert</th><th>first</th><th>last</th>"
@@ -197,6 +209,12 @@ def write(path, rows: list[dict], ev: dict[str, Any], failures: list[dict], summ
         out.append(f"<h3 id='{e(aid)}' class='{'alert' if aid in alerted else ''}'>{e(aid)}</h3>"
                    f"<img alt='{e(aid)}' src='data:image/png;base64,{_png(fig)}'>")
         plt.close(fig)
+        said = verdicts(by_act[aid])
+        if said:
+            out.append("<p><small>what diagnose said: " + "; ".join(
+                f"{e(par)}: " + ", ".join(f"{e(v)} in {n}" for v, n in sorted(c.items()))
+                for par, c in sorted(said.items())) + f" (of {len({r['recording'] for r in by_act[aid]})} "
+                "recordings)</small></p>")
     out.append("</body></html>")
     with open(path, "w", encoding="utf-8") as fh:
         fh.write("\n".join(out))

@@ -12,8 +12,8 @@ UTC), ``start_time_source``, ``source`` (``tracked``: the health estimator of :m
 recording; ``finding``: a parameter of an effect ``diagnose`` accepted), ``effect``, ``parameter``,
 ``value``, ``uncertainty`` (1 sigma), ``unit``, ``nominal``, ``heldout_before``, ``heldout_after``,
 ``heldout_metric``, ``accepted`` (``diagnose`` accepted this effect in this recording), ``diagnosis`` (what
-``diagnose`` said about this parameter's effect in this recording: ``accepted: value +- sd``, ``rejected: why``,
-``suspected, not identifiable: why``; empty when it did not test it), ``diagnose_value``,
+``diagnose`` said about this parameter's effect in this recording: ``accepted: value +- sd``, ``not found: why``
+(tested, no evidence), a verdict such as ``not_identifiable: why``; empty when it did not test it), ``diagnose_value``,
 ``diagnose_uncertainty`` (the value +- sd ``diagnose`` fitted for this parameter when it accepted it), ``status`` (``ok``; ``warning``: the value
 stands but the recording has a data issue of :data:`SERIOUS_ISSUES`; ``not_checkable``, ``not_identifiable``,
 ``failed``), ``reason``, ``data_issues`` (every data issue of the recording, ``kind channel: detail``, also
@@ -219,7 +219,7 @@ def _diagnosis_by_effect(report: dict | None) -> dict[str, str]:
     for r in report.get("rejected", []) or []:
         e = r.get("effect")
         if e and e not in out:
-            out[e] = f"{r.get('verdict') or 'rejected'}: {r.get('reason') or r.get('form') or ''}".strip(": ")
+            out[e] = f"{r.get('verdict') or 'not found'}: {r.get('reason') or r.get('form') or ''}".strip(": ")
     for f in report.get("findings", []) or []:
         unc = f.get("uncertainty") or {}
         vals = ", ".join(f"{k} = {_g(v)} ± {_g(unc.get(k))}" for k, v in (f.get("parameters") or {}).items()
