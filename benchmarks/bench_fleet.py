@@ -58,6 +58,8 @@ def main(argv=None) -> int:
     ap.add_argument("--reuse", action="store_true", help="reuse a fleet already generated in OUT/fleet")
     ap.add_argument("--stable", action="store_true", help="measure the false-alarm rate on a stable fleet")
     ap.add_argument("--loop", choices=("open", "closed"), default="open")
+    ap.add_argument("--evaluate-only", action="store_true",
+                    help="--stable: re-evaluate the alerts of an existing OUT/out_stable/fleet.parquet (no run)")
     a = ap.parse_args(argv)
     if a.stable:
         return stable(a)
@@ -122,7 +124,7 @@ def stable(a) -> int:
     w = int(a.workers.split(",")[-1])
     out = a.out / "out_stable"
     extra = ["--tracked-only"] if a.tracked_only else []
-    rc = cli(["fleet", str(root / "**" / "*.mcap"), str(root / "**" / "*.csv"), "--params", str(root / "params.yaml"),
+    rc = 0 if a.evaluate_only else cli(["fleet", str(root / "**" / "*.mcap"), str(root / "**" / "*.csv"), "--params", str(root / "params.yaml"),
               "--out", str(out), "--workers", str(w), "--no-progress", *extra])
     if rc != 0:
         return rc

@@ -19,7 +19,10 @@ of alert, each with its evidence; one alert record per series that raises any of
                  out of the pool). When the stated
                  uncertainties are honest (B^2 <= 1) the test is a z-test with them; when recordings scatter
                  more than stated, the scatter is measured on the fleet and the t quantile pays for its
-                 estimation. FALSE-ALARM RATE: ``alpha`` per series and run (default 0.001) for stable
+                 estimation. From 5 recordings on, a series whose OWN chi^2/dof exceeds the fleet's uses its
+                 own (t quantile with its own n - 2 dof): the fleet's log formats differ (a log with voltage
+                 fixes K_t far better than one without), and a pooled B^2 below 1 let the worst-stated series
+                 of a 30-day fleet alarm at 5x alpha. FALSE-ALARM RATE: ``alpha`` per series and run (default 0.001) for stable
                  actuators whose recording-to-recording scatter is Gaussian, independent and shares one
                  over-dispersion factor per parameter across the fleet (checked by Monte Carlo in
                  ``test_fleet_alerts.py`` and measured on a generated stable fleet: docs/fleet.md).
@@ -47,6 +50,9 @@ DEFAULT_ALPHA = 1e-3
 DEFAULT_K_SIGMA = 5.0
 DEFAULT_TOLERANCE = 0.10
 MIN_DRIFT = 3
+#: from this many residual dof (recordings - 2) on, a series' own over-dispersion is used when it exceeds the
+#: fleet's (fewer: its chi^2 says too little)
+MIN_OWN_DOF = 3
 #: a series whose own straight-line chi^2 has a p-value below this is not pooled (a step, not scatter)
 POOL_EXCLUDE_P = 1e-4
 USABLE_STATUS = ("ok", "warning")
@@ -145,12 +151,19 @@ def drift_test(t: np.ndarray, v: np.ndarray, u: np.ndarray, *, b2: float = 1.0, 
         return {"tested": False, "alert": False, "reason": f"{n} recording(s); the drift test needs >= {MIN_DRIFT} "
                 "at different times"}
     f = line_fit(t, v, u)
-    F = math.sqrt(max(1.0, b2))
+    own = f["chi2"] / f["dof"] if f["dof"] >= MIN_OWN_DOF else 0.0
+    if own > max(1.0, b2):          # this series scatters more than the fleet's: its own estimate, its own dof
+        F, dof, source = math.sqrt(own), f["dof"], "own"
+    elif b2 > 1.0 and dof_pool > 0:
+        F, dof, source = math.sqrt(b2), dof_pool, "fleet"
+    else:
+        F, dof, source = 1.0, 0, "stated"
     se = F * f["se_b"]
     stat = f["b"] / se if se > 0 else (math.copysign(math.inf, f["b"]) if f["b"] else 0.0)
-    crit = float(tdist.ppf(1 - alpha / 2, dof_pool)) if (b2 > 1.0 and dof_pool > 0) else float(norm.ppf(1 - alpha / 2))
+    crit = float(tdist.ppf(1 - alpha / 2, dof)) if dof > 0 else float(norm.ppf(1 - alpha / 2))
     return {"tested": True, "alert": bool(abs(stat) > crit), "slope_per_day": f["b"], "slope_se_per_day": se,
-            "statistic": stat, "critical": crit, "overdispersion_F": F, "pooled_dof": dof_pool,
+            "statistic": stat, "critical": crit, "overdispersion_F": F, "overdispersion_from": source,
+            "pooled_dof": dof_pool,
             "chi2": f["chi2"], "dof": f["dof"], "t_w": f["t_w"], "value_at_t_w": f["a"], "n": n}
 
 
