@@ -33,6 +33,13 @@ cools through R_ha during the recording: with the fleet's thermal time constant 
 Usage::
 
     python benchmarks/fleet_gen.py OUT_DIR [--actuators 8] [--days 30] [--duration 20] [--rate 250]
+                                   [--loop open|closed] [--noise 1.0] [--stable]
+
+``--loop closed``: a joint controller (PD on the output angle at the log rate, current command from the
+nominal K_t and gear) follows smooth swings with two standstill holds instead of the open-loop multi-sine
+current (:func:`run_closed_loop`); ``--noise 0``: no sensor noise (quantisation stays); ``--stable``: no
+planted drift. In Python, :class:`Unit` ``schedule`` sets exact per-day true values and ``generate(...,
+unfinalized=k)`` cuts the last k MCAP files short (a recorder that never closed them).
 
 Writes ``OUT_DIR/params.yaml`` (the nominal parameters every diagnosis starts from), ``OUT_DIR/truth.json``
 (which actuator drifts in which parameter) and the recordings.
