@@ -414,6 +414,69 @@ def replay_substeps(fs: float) -> int:
     return 1 if fs >= REPLAY_HOLD_RATE else int(math.ceil(REPLAY_HOLD_RATE / fs))
 
 
+
+@dataclass
+class WindowStart:
+    """The drive's and the plant's state at the start of replay windows (one entry per column)."""
+
+    i_d: np.ndarray      #: true winding d current [A] (the sensors' reading inverted)
+    i_q: np.ndarray      #: true winding q current [A]
+    v: np.ndarray        #: applied d/q voltage (complex) [V], inside the inverter's circle
+    z: np.ndarray        #: PI integrators (complex) [V]
+    K: np.ndarray        #: the plant's torque / back-EMF constant at the start [V*s/rad]
+
+
+def window_start(plist: list[ActuatorParams], i_d_meas, i_q_meas, omega, theta, T_w, T_h) -> WindowStart:
+    """Steady state of each parameter set's drive at a recorded state (issue #14, symptom 1): the current the
+    sensors report is inverted through that set's sensor offsets and gains (the plant starts with the true
+    current), the applied voltage is the plant's steady voltage for that current and speed — R(T_w) i, the
+    cross-coupling p ω L i and back-EMF K(T_h, i_q) ω — limited to the
+    inverter's circle as the drive limits it (``drive.voltage_limit_mode``, ``drive.modulation_limit``), and the
+    PI integrators hold what that drive's integrators hold there: the applied voltage less the decoupling
+    feed-forward when ``drive.decoupling_enabled`` (R i), the whole voltage without it (R i + K ω: a drive without
+    feed-forward carries the back-EMF in its integrator); at the limit the back-calculation anti-windup leaves
+    the PI output on the circle. The delayed voltage (``drive.current_loop_delay``) is the same held voltage.
+    Started otherwise every window opens with a current transient that grows with K ω and makes the right K look
+    wrong. The dead-time error is left out: it flips with the sign of each phase current, which a low-passed
+    current near zero does not resolve (held in the start it made the first milliseconds 20 x worse on a drive
+    with 1 µs dead time; the integrator finds it within a few loop periods)."""
+    from .. import kernel
+
+    n = len(plist)
+    i_d = np.array(i_d_meas, float).copy()
+    i_q = np.array(i_q_meas, float).copy()
+    omega, theta = np.asarray(omega, float), np.asarray(theta, float)
+    K = np.zeros(n)
+    v = np.zeros(n, complex)
+    z = np.zeros(n, complex)
+    for c, p in enumerate(plist):
+        m, d = p.motor, p.drive
+        th_e = m.pole_pairs * float(theta[c])
+        if d.current_sensor_offset_a or d.current_sensor_offset_b or d.current_sensor_gain_a != 1.0 \
+                or d.current_sensor_gain_b != 1.0:
+            f = lambda x, y: np.array(kernel.measured_current_dq(x, y, th_e, d.current_sensor_offset_a,  # noqa: E731
+                                                                   d.current_sensor_offset_b, d.current_sensor_gain_a,
+                                                                   d.current_sensor_gain_b))
+            m0 = f(0.0, 0.0)
+            M = np.column_stack([f(1.0, 0.0) - m0, f(0.0, 1.0) - m0])
+            i_d[c], i_q[c] = np.linalg.solve(M, np.array([i_d[c], i_q[c]]) - m0)
+        R = effects.resistance_at(m.phase_resistance, float(T_w[c]), m.reference_temperature,
+                                  m.copper_temperature_coefficient, m.resistance_temperature_enabled)
+        Kc = m.torque_constant_q * effects.flux_factor(float(T_h[c]), m.reference_temperature,
+                                                       m.magnet_temperature_coefficient, m.magnet_temperature_enabled)
+        Kc = float(Kc * effects.saturation_factor(i_q[c], p.effects.kt_saturation))
+        w = float(omega[c])
+        i = complex(i_d[c], i_q[c])
+        v_plant = (R + 1j * m.pole_pairs * w * m.q_inductance) * i + 1j * Kc * w
+        v_max = frames.voltage_limit_q(d.bus_voltage, m.winding) * d.modulation_limit
+        v_app = kernel.limit_voltage(v_plant, v_max, float(kernel.VOLTAGE_LIMIT_MODES.index(d.voltage_limit_mode)))
+        # the feed-forward acts on the MEASURED current with the nominal-temperature K of the drive's parameters
+        i_m = complex(float(np.asarray(i_d_meas)[c]), float(np.asarray(i_q_meas)[c]))
+        v_ff = 1j * (m.pole_pairs * w * m.q_inductance * i_m + m.torque_constant_q * w) if d.decoupling_enabled else 0j
+        K[c], v[c], z[c] = Kc, v_app, v_app - v_ff
+    return WindowStart(i_d, i_q, v, z, K)
+
+
 def _simulate_batch(ctx: Context, plist: list[ActuatorParams], st: np.ndarray, L: int, i_meas: np.ndarray,
                     cmd: np.ndarray, load: np.ndarray | None) -> dict:
     """One :class:`BatchActuator` over windows starting at ``st`` (one parameter set per column), driven by the
@@ -421,24 +484,12 @@ def _simulate_batch(ctx: Context, plist: list[ActuatorParams], st: np.ndarray, L
     b = BatchActuator(plist)
     S = ctx.sig
     w_meas = S["omega_s"]
-    # the resistance and flux at each window's temperatures, as the kernel evaluates them (effects.py): the
-    # initial voltage and PI integrator must hold the drop the model's own plant has there, else every window
-    # starts with a current sag that is the initialisation's, not the model's (issue #7, R(T) judged worse)
     T_w0, T_h0 = S["T_w"][st], S["T_h"][st]
-    K = np.array([p.motor.torque_constant_q * effects.flux_factor(th, p.motor.reference_temperature,
-                                                                    p.motor.magnet_temperature_coefficient,
-                                                                    p.motor.magnet_temperature_enabled)
-                  for p, th in zip(plist, T_h0)])
-    R = np.array([effects.resistance_at(p.motor.phase_resistance, tw, p.motor.reference_temperature,
-                                        p.motor.copper_temperature_coefficient, p.motor.resistance_temperature_enabled)
-                  for p, tw in zip(plist, T_w0)])
-    Lq = np.array([p.motor.q_inductance for p in plist])
-    pp = np.array([p.motor.pole_pairs for p in plist])
-    i_q0, w0 = i_meas[st], w_meas[st]
-    i_d0 = ctx.dec.lowpass(S["i_d"])[st]
-    b.set_state(i_d=i_d0, i_q=i_q0, omega=w0, theta=S["theta"][st], T_winding=T_w0,
-                T_housing=T_h0, v_d=R * i_d0 - pp * w0 * Lq * i_q0,
-                v_q=R * i_q0 + K * w0 + pp * w0 * Lq * i_d0, z_d=R * i_d0, z_q=R * i_q0, i_q_ref=cmd[st])
+    i_d_meas0 = ctx.dec.lowpass(S["i_d"])[st]
+    ws = window_start(plist, i_d_meas0, i_meas[st], w_meas[st], S["theta"][st], T_w0, T_h0)
+    K = ws.K
+    b.set_state(i_d=ws.i_d, i_q=ws.i_q, omega=w_meas[st], theta=S["theta"][st], T_winding=T_w0, T_housing=T_h0,
+                v_d=ws.v.real, v_q=ws.v.imag, z_d=ws.z.real, z_q=ws.z.imag, i_q_ref=cmd[st])
     dt = 1.0 / ctx.fs
     sensed = any(p.drive.current_sensor_offset_a or p.drive.current_sensor_offset_b
                  or p.drive.current_sensor_gain_a != 1.0 or p.drive.current_sensor_gain_b != 1.0 for p in plist)
