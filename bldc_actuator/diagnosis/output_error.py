@@ -98,7 +98,7 @@ def refit(ctx, nominal: ActuatorParams, updated: ActuatorParams, starts_train: l
     fields = changed_fields(nominal, updated)
     fields += [f for f in CORE_FIELDS if f not in fields]
     flat0 = updated.to_flat()
-    x_kind = {f: "log" if _split(f)[1] is None and flat0[f] > 0 and SPECS[f].range[0] >= 0 else "lin" for f in fields}
+    x_kind = {f: "log" if _split(f)[1] is None and flat0[f] > 0 and SPECS[f].limits[0] >= 0 else "lin" for f in fields}
     v0 = np.array([_flat_value(flat0, f) for f in fields])
     lin_scale = np.where(np.abs(v0) > 0, np.abs(v0), 1e-3)
 
@@ -112,8 +112,8 @@ def refit(ctx, nominal: ActuatorParams, updated: ActuatorParams, starts_train: l
         for f, v in zip(fields, vals):
             name, i = _split(f)
             if i is None:
-                lo, hi = SPECS[name].range
-                upd[name] = min(max(float(v), lo), hi)
+                lo, hi, lo_open = SPECS[name].limits
+                upd[name] = min(max(float(v), lo if not lo_open else lo + abs(lo) * 1e-9 + 1e-300), hi)
             else:       # one harmonic of a series: the others as they are
                 series = list(upd.get(name, flat0[name]))
                 series[i] = float(v)

@@ -25,7 +25,7 @@ import numpy as np
 
 from .. import effects, frames
 from ..model import BatchActuator
-from ..params import SPECS, ActuatorParams, from_flat
+from ..params import SPECS, ActuatorParams, from_flat, outside_usual_range
 from .candidates import Candidate
 from .equation_error import Context, Fit, thermal_response
 from .selection import SelectionResult, fit_model
@@ -218,6 +218,22 @@ def sensor_gains_for_q_ripple(c: float, s: float) -> tuple[float, float, float]:
     return 0.5 * diff, -0.5 * diff, share
 
 
+def _within_limits(spec, v, notes: list[str], fld: str):
+    """A fitted value for field ``spec``: clipped into its PHYSICAL limits only (a negative friction, a modulation
+    limit above 1), with a note; outside the usual (sanity) range it is written as fitted, with a note (issue
+    #14: a 95 kg axis's 203.5 N s/m is real)."""
+    lo, hi, lo_open = spec.limits
+    lo_eff = lo if not lo_open else (lo + abs(lo) * 1e-9 + 1e-300)
+    clipped = min(max(v, lo_eff), hi)
+    if clipped != v:
+        notes.append(f"{fld}: fitted {v:.4g} clipped into its physical limits [{lo:g}, {hi:g}] {spec.unit}")
+        v = clipped
+    if outside_usual_range(spec, v):
+        notes.append(f"{fld}: {v:.4g} {spec.unit} written as fitted, outside the usual range "
+                     f"[{spec.range[0]:g}, {spec.range[1]:g}] (a sanity limit, not physics)")
+    return v
+
+
 def updated_params(ctx: Context, sel: SelectionResult, pars: dict[str, dict], lib: dict[str, Candidate]):
     """New :class:`ActuatorParams` with the accepted effects switched on; returns (params, notes, not_simulated)."""
     flat = ctx.params.to_flat()
@@ -285,13 +301,8 @@ def updated_params(ctx: Context, sel: SelectionResult, pars: dict[str, dict], li
             v = info["value"]
             if spec.type is int:
                 v = int(round(v))
-            lo, hi = spec.range
             if spec.type in (int, float):
-                lo_eff = lo if not spec.lo_open else (lo + abs(lo) * 1e-9 + 1e-300)
-                clipped = min(max(v, lo_eff), hi)
-                if clipped != v:
-                    notes.append(f"{fld}: fitted {v:.4g} clipped into its range [{lo:g}, {hi:g}] {spec.unit}")
-                    v = clipped
+                v = _within_limits(spec, v, notes, fld)
             flat[fld] = v
     try:
         newp = from_flat(flat)
@@ -703,9 +714,7 @@ def apply_thermal(params: ActuatorParams, thermal: dict[str, Any]):
             flat.update(f["updated_fields"])
         elif f["effect"] in ("thermal_parameters", "voltage_saturation", "iron_loss") and f.get("simulated"):
             for name, fld in f["fields"].items():
-                spec = SPECS[fld]
-                lo, hi = spec.range
-                flat[fld] = min(max(f["parameters"][name], lo * (1 + 1e-9) + 1e-300), hi)
+                flat[fld] = _within_limits(SPECS[fld], f["parameters"][name], notes, fld)
             if f["effect"] == "iron_loss":
                 # the nominal friction and damping already hold the total drag a test measured: the iron terms
                 # take their share of it (and heat the stator), the rest stays friction
