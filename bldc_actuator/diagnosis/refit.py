@@ -243,15 +243,16 @@ def updated_params(ctx: Context, sel: SelectionResult, pars: dict[str, dict], li
     for a in sel.accepted:
         cand = lib[a.effect]
         p = pars[a.effect]
-        if a.effect == "electrical_angle_ripple" and a.variant.hyper.get("kind") == "offset":
-            o_a, o_b = sensor_offsets_for_q_ripple(p["_cos"]["value"], p["_sin"]["value"])
+        kind = a.variant.hyper.get("kind")
+        if a.effect == "electrical_angle_ripple" and kind == "offset":
+            o_a, o_b = sensor_offsets_for_q_ripple(p["_offset_cos"]["value"], p["_offset_sin"]["value"])
             flat["drive.current_sensor_offset_a"] = flat["drive.current_sensor_offset_a"] + o_a
             flat["drive.current_sensor_offset_b"] = flat["drive.current_sensor_offset_b"] + o_b
             notes.append(f"electrical_angle_ripple (current-sensor offsets) written as drive.current_sensor_offset_a/_b "
                          f"+= {o_a:.4g} / {o_b:.4g} A: the simulated controller acts on the offset measurement")
             continue
-        if a.effect == "electrical_angle_ripple" and a.variant.hyper.get("kind") == "gain":
-            d_a, d_b, share = sensor_gains_for_q_ripple(p["_cos"]["value"], p["_sin"]["value"])
+        if a.effect == "electrical_angle_ripple" and kind == "gain":
+            d_a, d_b, share = sensor_gains_for_q_ripple(p["_gain_cos"]["value"], p["_gain_sin"]["value"])
             flat["drive.current_sensor_gain_a"] = flat["drive.current_sensor_gain_a"] + d_a
             flat["drive.current_sensor_gain_b"] = flat["drive.current_sensor_gain_b"] + d_b
             notes.append(f"electrical_angle_ripple (current-sensor gain mismatch) written as "
@@ -264,8 +265,8 @@ def updated_params(ctx: Context, sel: SelectionResult, pars: dict[str, dict], li
                     and not ctx.params.effects.cogging_order:
                 o = a.variant.hyper["order"]
                 flat["effects.cogging_order"] = o
-                flat["effects.cogging_cos"] = (p["_cos"]["value"],)
-                flat["effects.cogging_sin"] = (p["_sin"]["value"],)
+                flat["effects.cogging_cos"] = (p["_torque_cos"]["value"],)
+                flat["effects.cogging_sin"] = (p["_torque_sin"]["value"],)
                 notes.append(f"electrical_angle_ripple (order {o}, current-independent) written as a cogging-like "
                              f"term effects.cogging_order={o}")
             else:
