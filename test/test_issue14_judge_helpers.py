@@ -61,3 +61,26 @@ def closed_loop_recording(truth: ActuatorParams, nominal: ActuatorParams, refere
         act.set_current_command(cmd)
         act.step(dt)
     return Signals(t, {k: v for k, v in out.items() if k in channels}, source="synthetic")
+
+
+def open_loop_recording(truth: ActuatorParams, profile, *, rate: float = 1000.0) -> Signals:
+    """``profile`` (output torque commands and load, :class:`bldc_actuator.profiles.Profile`) played into the
+    ``truth`` actuator, each command held for one sample; logged at every sample instant before the command is
+    applied, as the node logs: q/d current, angle, speed, q/d voltage, torque command and load, no noise."""
+    act = Actuator(truth)
+    dt = 1.0 / rate
+    n = len(profile.t)
+    names = ("torque_command", "load_torque", "current", "current_d", "position", "velocity", "voltage_q",
+             "voltage_d")
+    out = {k: np.zeros(n) for k in names}
+    for k in range(n):
+        s = act.state
+        out["current"][k], out["current_d"][k] = s.i_q, s.i_d
+        out["position"][k], out["velocity"][k] = s.theta, s.omega
+        out["voltage_q"][k], out["voltage_d"][k] = s.v_q, s.v_d
+        out["torque_command"][k] = profile.values[k]
+        out["load_torque"][k] = profile.load_torque[k] if profile.load_torque is not None else 0.0
+        act.set_torque_command(float(profile.values[k]))
+        act.set_load_torque(float(out["load_torque"][k]))
+        act.step(dt)
+    return Signals(np.arange(n) * dt, out, source="synthetic")
