@@ -77,3 +77,27 @@ def test_every_window_starts_in_the_drives_own_steady_state(name):
     if "limit" in name:   # windows start at the voltage limit (else the case tests nothing)
         v = np.hypot(sig.channels["voltage_q"], sig.channels["voltage_d"])
         assert np.sum(v[np.array(starts)] > 0.97 * 3.0 / math.sqrt(2)) >= 1
+
+
+def test_a_drive_unlike_the_users_parameters_is_judged_by_the_measured_current():
+    """Coulomb friction behind a drive whose parameters the user got wrong (the file says a 0.15 A current
+    limit; the drive limits at 20 A): the emulated drive clips its commands and misses the recorded current
+    (the drive check, reported as a number, fails), so the torque-side finding is judged by the mechanical
+    equation driven by the MEASURED current, which needs nothing of the drive, and confirmed (before: refused,
+    "not checkable in simulation", the emulated drive's speed error 52 % of the recorded speed)."""
+    nominal = BASE
+    truth = nominal.replace(**{"effects.coulomb_friction": 0.02})
+    user = nominal.replace(**{"drive.current_limit": 0.15})
+    sig = closed_loop_recording(truth, nominal, reference, duration=16.0, seed=5)
+    rep = diagnose(sig, user, options=DiagnoseOptions())
+    f = rep.finding("coulomb_friction")
+    assert f is not None and f["parameters"]["coulomb_friction"] == pytest.approx(0.02, rel=0.02)
+    sim = f["simulation"]
+    assert sim["verdict"] == "confirmed" and sim["replay"].startswith("mechanical equation driven by the measured")
+    chk = sim["drive_check"]
+    assert not chk["ok"] and chk["current_error_rms"] > 2 * chk["current_noise"]
+    assert sim["with"] < 0.05 * sim["without"]
+    # the drive described right: the emulation reproduces the current and judges as before
+    rep2 = diagnose(sig, nominal, options=DiagnoseOptions())
+    sim2 = rep2.finding("coulomb_friction")["simulation"]
+    assert sim2["drive_check"]["ok"] and sim2["replay"].startswith("closed-loop") and sim2["verdict"] == "confirmed"

@@ -34,7 +34,7 @@ def test_the_projects_own_loop_closed_example_fits_coulomb_within_its_uncertaint
     assert [x["effect"] for x in rep.to_dict()["findings"]] == ["coulomb_friction"]
     v, sd = f["parameters"]["coulomb_friction"], f["uncertainty"]["coulomb_friction"]
     assert v == pytest.approx(0.06, rel=0.01) and abs(v - 0.06) < 3 * sd, (v, sd)
-    assert any("read +0.3" in n or "read +0.4" in n for n in rep._internals["ctx"].notes)
+    assert any("measured current +0.3" in n or "measured current +0.4" in n for n in rep._internals["ctx"].notes)
     assert rep.updated_params.effects.coulomb_friction == pytest.approx(0.06, rel=0.02)
 
 

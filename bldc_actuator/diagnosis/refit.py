@@ -347,13 +347,15 @@ def windows(ctx: Context, length: float, max_windows: int, which: str) -> list[i
     return starts
 
 
-def replay(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], length: float) -> list[dict[str, Any]]:
+def replay(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], length: float,
+           drive: str = "closed_loop") -> list[dict[str, Any]]:
     """Simulate every window under every parameter set (one BatchActuator); per set: RMS error of current
     [A], speed [rad/s] and angle [rad] against the (low-passed) measurements, and the traces of the first
-    windows for plots."""
+    windows for plots. ``drive``: ``closed_loop`` (the drive emulated from the recorded commands) or ``current``
+    (the mechanical equation driven by the measured current, :func:`simulate_windows`)."""
     if not starts or "i_q" not in ctx.sig or "omega" not in ctx.sig:
         return [{"available": False} for _ in param_sets]
-    r = simulate_windows(ctx, param_sets, starts, length)
+    r = simulate_windows(ctx, param_sets, starts, length, drive=drive)
     nW, nP = len(starts), len(param_sets)
     sim_i, sim_w, sim_th, sim_v = r["sim_i"], r["sim_w"], r["sim_th"], r["sim_v"]
     meas_i, meas_w, meas_th, meas_v, idx = r["meas_i"], r["meas_w"], r["meas_th"], r["meas_v"], r["idx"]
@@ -382,12 +384,20 @@ def replay(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], le
     return out
 
 
-def simulate_windows(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], length: float) -> dict:
+def simulate_windows(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], length: float,
+                     drive: str = "closed_loop") -> dict:
     """Multiple shooting: every window started from the recorded state and simulated under every parameter set
     in ONE :class:`BatchActuator` run (one per group of sets that share the current-loop rate and delay, which a
     batch cannot mix). Returns the simulated and measured (low-passed) current, speed, angle and q voltage (and
     the simulated d current ``sim_id``) as ``(samples, sets x windows)`` arrays (set-major columns) and the
-    sample indices."""
+    sample indices.
+
+    ``drive="closed_loop"``: the drive emulated (its PI current loop from the recorded command, started in its
+    own steady state, :func:`window_start`). ``drive="current"``: what a torque-side effect needs and nothing the
+    user rarely knows — the drive's internals — the mechanical equation driven by ``K i`` with the MEASURED
+    current (:func:`mechanical_replay_params`); the simulated current is then the measured one."""
+    if drive == "current":
+        return _simulate_current_driven(ctx, param_sets, starts, length)
     L = max(5, int(round(length * ctx.fs)))
     nW = len(starts)
     plist = []
@@ -414,6 +424,106 @@ def simulate_windows(ctx: Context, param_sets: list[ActuatorParams], starts: lis
     return {**sims, "meas_i": i_meas[idx], "meas_w": S["omega_s"][idx], "meas_th": S["theta"][idx],
             "meas_v": meas_v, "idx": idx}
 
+
+
+#: the torque constant of the electrical side in a current-driven replay [V*s/rad]: the kernel's winding is kept
+#: (its equations are the mechanical one's neighbours), but with no current and no back-EMF it exchanges nothing
+_INERT_K = 1e-12
+
+
+def mechanical_replay_params(p: ActuatorParams) -> ActuatorParams:
+    """``p`` with an inert electrical side, for the current-driven replay: the motor's torque ``K(T_h, i) i N``
+    from the measured current enters the kernel as an external (negative) output load, so every torque-side
+    term — inertia, viscous and iron-loss drag, friction with stick/slip, cogging, position loads — is the
+    kernel's own (one implementation of the equations)."""
+    return p.replace(**{"motor.torque_constant_q": _INERT_K, "drive.dead_time": 0.0,
+                        "drive.current_sensor_offset_a": 0.0, "drive.current_sensor_offset_b": 0.0,
+                        "drive.current_sensor_gain_a": 1.0, "drive.current_sensor_gain_b": 1.0,
+                        "effects.kt_saturation": 0.0})
+
+
+def true_current(ctx: Context, p: ActuatorParams) -> tuple[np.ndarray, np.ndarray]:
+    """The winding d/q current [A] behind the recorded (sensor) current under ``p``'s sensor offsets and gains
+    (the sensor model inverted sample by sample; the recorded current when the sensors are ideal)."""
+    from .. import kernel
+
+    S = ctx.sig
+    i_d, i_q = np.asarray(S["i_d"], float), np.asarray(S["i_q"], float)
+    d = p.drive
+    if not (d.current_sensor_offset_a or d.current_sensor_offset_b or d.current_sensor_gain_a != 1.0
+            or d.current_sensor_gain_b != 1.0):
+        return i_d, i_q
+    th_e = p.motor.pole_pairs * np.asarray(S["theta"], float)
+    args = (d.current_sensor_offset_a, d.current_sensor_offset_b, d.current_sensor_gain_a, d.current_sensor_gain_b)
+    f = np.vectorize(lambda x, y, th: kernel.measured_current_dq(x, y, th, *args), otypes=[float, float])
+    z = np.zeros_like(th_e)
+    m0d, m0q = f(z, z, th_e)
+    a_d, a_q = f(z + 1.0, z, th_e)
+    b_d, b_q = f(z, z + 1.0, th_e)
+    a_d, a_q, b_d, b_q = a_d - m0d, a_q - m0q, b_d - m0d, b_q - m0q
+    det = a_d * b_q - b_d * a_q
+    rd, rq = i_d - m0d, i_q - m0q
+    return (b_q * rd - b_d * rq) / det, (a_d * rq - a_q * rd) / det
+
+
+def _simulate_current_driven(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], length: float) -> dict:
+    L = max(5, int(round(length * ctx.fs)))
+    nW = len(starts)
+    S = ctx.sig
+    use_sensor = "torque" in ctx.have
+    w_meas = S["omega_s"]
+    st_one = np.asarray(starts, int)
+    last = len(ctx.t) - 1
+    n_sub = replay_substeps(ctx.fs)
+    dt = 1.0 / ctx.fs
+    ext = ctx.raw["torque"] if use_sensor else (ctx.raw["load_torque"] if "load_torque" in ctx.have else None)
+    plist, drive_torque = [], []
+    for p in param_sets:
+        if use_sensor:   # the sensor measures the load: the modelled load must not count twice
+            p = p.replace(**{"load.load_torque": 0.0, "load.gravity_torque": 0.0, "load.spring_stiffness": 0.0})
+        m = p.motor
+        # the low-passed current (the equation error's band): the sensor noise above it, integrated over a
+        # window, would be a speed random walk larger than most effects
+        i_d_t, i_q = true_current(ctx, p)
+        if "i_q_torque" in S:       # aligned with the motion (search): the torque's timing, not the sample's
+            i_q = i_q + (S["i_q_torque"] - S["i_q"])
+        i_q = ctx.dec.lowpass(i_q)
+        K = m.torque_constant_q * effects.flux_factor(S["T_h"], m.reference_temperature,
+                                                      m.magnet_temperature_coefficient, m.magnet_temperature_enabled)
+        K = K * effects.saturation_factor(i_q, p.effects.kt_saturation)
+        tau_out = K * i_q * p.gear.gear_ratio                      # the motor's torque at the output
+        drive_torque.append(tau_out - (ext if ext is not None else 0.0))
+        plist.append(mechanical_replay_params(p))
+    groups: dict[tuple, list[int]] = {}
+    for j, p in enumerate(plist):
+        groups.setdefault((p.drive.current_loop_rate, p.drive.current_loop_delay), []).append(j)
+    cols_all = len(plist) * nW
+    sims = {k: np.zeros((L, cols_all)) for k in ("sim_i", "sim_w", "sim_th", "sim_v", "sim_id")}
+    i_lp = ctx.dec.lowpass(S["i_q"])
+    for js in groups.values():
+        b = BatchActuator([plist[j] for j in js for _ in range(nW)])
+        st = np.tile(st_one, len(js))
+        b.set_state(i_d=0.0, i_q=0.0, omega=w_meas[st], theta=S["theta"][st], T_winding=S["T_w"][st],
+                    T_housing=S["T_h"][st])
+        tau = np.vstack([drive_torque[j] for j in js])            # (sets in group, samples)
+        rows = np.repeat(np.arange(len(js)), nW)
+        cols = np.concatenate([np.arange(j * nW, (j + 1) * nW) for j in js])
+        for k in range(L):
+            a, z = st + k, np.minimum(st + k + 1, last)
+            for jj in range(n_sub):
+                # the torque over the sub-step: the measured current at its midpoint (aligned with the motion
+                # in search: a current at sample k acts around t_k)
+                f = (jj + 0.5) / n_sub
+                b.set_load_torque(-(tau[rows, a] + f * (tau[rows, z] - tau[rows, a])))
+                b.step(dt / n_sub)
+            sims["sim_w"][k, cols] = b.field("omega")
+            sims["sim_th"][k, cols] = b.field("theta")
+    idx_one = st_one[None, :] + np.arange(1, L + 1)[:, None]
+    idx = np.tile(idx_one, (1, len(plist)))
+    sims["sim_i"][:] = i_lp[idx]            # the current is the recording's (not simulated)
+    sims["sim_v"][:] = np.nan
+    return {**sims, "meas_i": i_lp[idx], "meas_w": w_meas[idx], "meas_th": S["theta"][idx], "meas_v": None,
+            "idx": idx}
 
 #: a log slower than this [Hz] holds samples of commands that changed between them (the joint controller runs
 #: at 1 kHz or faster): the replay interpolates them linearly over sub-steps of at most 1 / this
