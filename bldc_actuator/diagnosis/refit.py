@@ -4,13 +4,15 @@
   velocity) refined by bounded 1-D search; covariance of every parameter from the Jacobian of the weighted
   residual (inflated by the residual's correlation time); correlations above 0.9 flagged.
 * :func:`updated_params` — accepted effects written onto :class:`~bldc_actuator.params.ActuatorParams` fields
-  (clipped into the schema's ranges, with a note when clipped); effects without schema fields are listed
-  as not simulated.
+  as fitted (clipped only into a field's physical limits; outside its usual range with a note: bounds are
+  sanity limits); effects without schema fields are listed as not simulated.
 * :func:`replay` — multiple shooting: the recording cut into short windows, each simulated by the
   :class:`~bldc_actuator.model.BatchActuator` (all windows and parameter sets in ONE batch) from the state
   measured at the window start, driven by the recorded commands and load (interpolated between the samples of
   a log slower than the joint controller); current, speed, angle and q-voltage errors (the voltage at the
-  recorded speed: the mechanical replay's back-EMF error removed).
+  recorded speed: the mechanical replay's back-EMF error removed). Each window starts in the simulated drive's
+  own steady state (:func:`window_start`); ``drive="current"`` replays the mechanical equation driven by the
+  measured current instead (nothing of the drive's internals needed).
 * :func:`thermal_error` — the two-node thermal network driven by the measured current vs recorded
   temperatures.
 """
