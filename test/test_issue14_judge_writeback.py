@@ -61,3 +61,25 @@ def test_an_output_error_value_against_its_finding_is_a_reported_discrepancy():
     d = output_error.discrepancies(far, findings, 0.05)
     assert len(d) == 1 and d[0]["effect"] == "torque_constant_error" and "disagrees" in d[0]["message"]
     assert output_error.discrepancies(near, findings, 0.05) == []
+
+
+def test_no_output_error_refit_on_replays_marked_not_checkable(monkeypatch):
+    """A finding kept as "not checkable in simulation" (the replay does not reproduce that recording): the
+    output-error refit, which would fit values to the simulator's misfit, is not run; the equation-error value
+    is written."""
+    from bldc_actuator.diagnosis import judge
+
+    real = judge.simulate_findings
+
+    def marked(*a, **k):
+        out = real(*a, **k)
+        return {e: dict(v, verdict="not checkable in simulation") for e, v in out.items()}
+
+    monkeypatch.setattr(judge, "simulate_findings", marked)
+    nominal = ActuatorParams().replace(**{"gear.gear_ratio": 9.0})
+    truth = nominal.replace(**{"effects.coulomb_friction": 0.02})
+    rep = diagnose(closed_loop_recording(truth, nominal, reference, duration=16.0, seed=5), nominal)
+    f = rep.finding("coulomb_friction")
+    oe = rep.to_dict()["compare"]["output_error_refit"]
+    assert not oe["available"] and "not checkable in simulation" in oe["reason"]
+    assert rep.updated_params.effects.coulomb_friction == f["parameters"]["coulomb_friction"]
