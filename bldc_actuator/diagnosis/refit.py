@@ -486,7 +486,7 @@ def _simulate_current_driven(ctx: Context, param_sets: list[ActuatorParams], sta
         m = p.motor
         # the low-passed current (the equation error's band): the sensor noise above it, integrated over a
         # window, would be a speed random walk larger than most effects
-        i_d_t, i_q = true_current(ctx, p)
+        i_q = true_current(ctx, p)[1]
         if "i_q_torque" in S:       # aligned with the motion (search): the torque's timing, not the sample's
             i_q = i_q + (S["i_q_torque"] - S["i_q"])
         i_q = ctx.dec.lowpass(i_q)
