@@ -116,5 +116,7 @@ def test_bounds_are_sanity_limits_a_real_value_outside_them_is_accepted_with_a_w
     assert sanity_warnings(ActuatorParams()) == []
     path = tmp_path / "axis.yaml"
     dump_yaml(p, path)
-    with pytest.warns(ParameterWarning, match="motor.viscous_damping"):
+    with pytest.warns(ParameterWarning) as caught:
         assert load_yaml(path) == p
+    assert sorted(str(w.message).split(": ", 1)[1].split(" =")[0] for w in caught) == \
+        ["motor.rotor_inertia", "motor.viscous_damping"]
