@@ -112,7 +112,9 @@ def describe(spec, *, runtime: bool) -> ParameterDescriptor:
     d = ParameterDescriptor(description=f"{spec.description}{unit}; " + "; ".join(extras),
                             read_only=not runtime)
     d.type = ros_type(spec.type).value
-    lo, hi = spec.range
+    # the enforced range is the field's PHYSICAL limits (its usual range, in the description, is a sanity limit:
+    # a value a real system has must load, issue #14)
+    lo, hi = getattr(spec, "limits", spec.range)[:2]
     if spec.type is float and math.isfinite(lo) and math.isfinite(hi):
         d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
     elif spec.type is int and math.isfinite(lo) and math.isfinite(hi):

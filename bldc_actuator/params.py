@@ -33,11 +33,27 @@ class ParameterError(ValueError):
         self.field = field_name
 
 
+class ParameterWarning(UserWarning):
+    """A value outside a field's usual (sanity) range: accepted, since real systems have such values, but
+    worth a look (a unit slip is the common cause)."""
+
+
+def _limits(lo: float, hi: float, lo_open: bool, unit: str) -> tuple[float, float, bool]:
+    """The physical limits implied by a sanity range: its sign constraints only (a resistance, inertia or
+    friction cannot be negative; a field bounded above by 0 cannot be positive); temperatures above absolute
+    zero. Everything else the sanity range says is a warning, not a refusal."""
+    h_lo = 0.0 if lo >= 0 else (-273.15 if unit == "degC" else -INF)
+    h_hi = 0.0 if hi <= 0 else INF
+    return h_lo, h_hi, bool(lo >= 0 and (lo_open or lo > 0))
+
+
 def _p(default, unit: str, description: str, lo: float = -INF, hi: float = INF, *,
-       runtime: bool = False, lo_open: bool = False, choices: tuple = ()):
-    """Field with metadata: unit, description, allowed range, whether it may change at run time."""
+       runtime: bool = False, lo_open: bool = False, choices: tuple = (), limits: tuple | None = None):
+    """Field with metadata: unit, description, usual range (sanity: outside it warns), physical limits (outside
+    them is an error; derived from the range's sign constraints unless ``limits`` = (lo, hi, lo_open) is given),
+    whether it may change at run time."""
     meta = {"unit": unit, "description": description, "range": (lo, hi), "lo_open": lo_open,
-            "runtime": runtime, "choices": choices}
+            "runtime": runtime, "choices": choices, "limits": limits or _limits(lo, hi, lo_open, unit)}
     if isinstance(default, (list, tuple)):
         return field(default_factory=lambda d=tuple(default): d, metadata=meta)
     return field(default=default, metadata=meta)
@@ -89,7 +105,8 @@ class DriveParams:
     trip_temperature: float = _p(120.0, "degC", "winding temperature where the drive trips (zero current, "
                                  "latched until reset)", -40.0, 300.0, runtime=True)
     modulation_limit: float = _p(1.0, "1", "m: |v_dq| <= m x the SVPWM limit of the winding (a drive's duty cap, "
-                                 "e.g. 0.9); 1 = full SVPWM", 0.0, 1.0, lo_open=True)
+                                 "e.g. 0.9); 1 = full SVPWM", 0.0, 1.0, lo_open=True,
+                                 limits=(0.0, 1.0, True))
     current_sensor_offset_a: float = _p(0.0, "A", "offset of the phase-a current sensor (the controller acts on "
                                         "the measured current: ripple at the electrical frequency)", -100.0, 100.0)
     current_sensor_offset_b: float = _p(0.0, "A", "offset of the phase-b current sensor (c = -(a + b))",
@@ -217,6 +234,7 @@ class ParameterSpec:
     lo_open: bool
     runtime: bool
     choices: tuple
+    limits: tuple = (-INF, INF, False)   #: physical limits (lo, hi, lo_open): outside them is an error
 
 
 def parameter_specs() -> Iterator[ParameterSpec]:
@@ -227,7 +245,7 @@ def parameter_specs() -> Iterator[ParameterSpec]:
             ftype = {"str": str, "int": int, "float": float, "bool": bool, "tuple": tuple}[str(f.type)]
             m = f.metadata
             yield ParameterSpec(f"{section}.{f.name}", ftype, default, m["unit"], m["description"],
-                                m["range"], m["lo_open"], m["runtime"], m["choices"])
+                                m["range"], m["lo_open"], m["runtime"], m["choices"], m["limits"])
 
 
 SPECS: dict[str, ParameterSpec] = {s.name: s for s in parameter_specs()}
@@ -273,17 +291,42 @@ def _coerce(spec: ParameterSpec, value: Any) -> Any:
     return float(value)
 
 
+def _interval(lo: float, hi: float, lo_open: bool) -> str:
+    return f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if math.isinf(hi) else ']'}"
+
+
 def check_value(spec: ParameterSpec, value: Any) -> Any:
-    """Coerce and range-check one value; raise ParameterError naming the field, range and unit."""
+    """Coerce and check one value against the field's PHYSICAL limits; raise ParameterError naming the field,
+    the limits, the usual range and the unit. A value outside the usual range only is accepted
+    (:func:`sanity_warnings` lists it)."""
     value = _coerce(spec, value)
     if spec.choices and value not in spec.choices:
         raise ParameterError(spec.name, f"expected one of {', '.join(spec.choices)}, got {value!r}")
     if spec.type in (int, float):
-        lo, hi = spec.range
-        if not math.isfinite(value) or value > hi or value < lo or (spec.lo_open and value == lo):
-            left = "(" if spec.lo_open else "["
-            raise ParameterError(spec.name, f"{value!r} is outside {left}{lo:g}, {hi:g}] {spec.unit}".rstrip())
+        lo, hi, lo_open = spec.limits
+        if not math.isfinite(value) or value > hi or value < lo or (lo_open and value == lo):
+            raise ParameterError(spec.name, f"{value!r} is outside {_interval(lo, hi, lo_open)} {spec.unit}".rstrip()
+                                 + f" (physical limit; usual range {_interval(*spec.range, spec.lo_open)})")
     return value
+
+
+def outside_usual_range(spec: ParameterSpec, value: Any) -> bool:
+    """True for a number outside the field's usual (sanity) range."""
+    if spec.type not in (int, float) or isinstance(value, bool) or not isinstance(value, (int, float)):
+        return False
+    lo, hi = spec.range
+    return value > hi or value < lo or (spec.lo_open and value == lo)
+
+
+def sanity_warnings(params: "ActuatorParams") -> list[str]:
+    """Every field whose value lies outside its usual range, in words (accepted: bounds are sanity limits)."""
+    out = []
+    for name, value in to_flat(params).items():
+        spec = SPECS[name]
+        if outside_usual_range(spec, value):
+            out.append(f"{name} = {value:g} {spec.unit} is outside its usual range "
+                       f"{_interval(*spec.range, spec.lo_open)} (accepted; check the unit if unexpected)".replace("  ", " "))
+    return out
 
 
 def from_flat(values: dict[str, Any], *, base: ActuatorParams | None = None) -> ActuatorParams:
@@ -441,9 +484,14 @@ def load_yaml(path: str | Path, *, base: ActuatorParams | None = None) -> Actuat
             raise ParameterError(str(path), f"node key {key!r} does not match bldc_actuator "
                                  f"(use {YAML_NODE_KEY!r})")
     try:
-        return params_from_dict(tree, base=base)
+        params = params_from_dict(tree, base=base)
     except ParameterError as exc:
         raise ParameterError(exc.field, f"{exc.args[0].split(': ', 1)[1]} (in {path})") from None
+    import warnings
+
+    for msg in sanity_warnings(params):
+        warnings.warn(f"{path}: {msg}", ParameterWarning, stacklevel=2)
+    return params
 
 
 def yaml_scalar(value: Any) -> str:

@@ -73,11 +73,15 @@ def test_every_model_parameter_is_declared_with_descriptor(ros_context, ros_exec
         value = node.get_parameter_or(name).value   # empty arrays are declared typed but unset
         expected = list(spec.default) if spec.type is tuple else spec.default
         assert (value if value is not None else []) == expected, name
+        lo, hi = spec.limits[:2]      # the physical limits are enforced; the usual range only warns
         if spec.type is float:
             assert d.type == ParameterType.PARAMETER_DOUBLE
-            assert (d.floating_point_range[0].from_value, d.floating_point_range[0].to_value) == spec.range
-        if spec.type is int:
-            assert (d.integer_range[0].from_value, d.integer_range[0].to_value) == spec.range
+            if math.isfinite(lo) and math.isfinite(hi):
+                assert (d.floating_point_range[0].from_value, d.floating_point_range[0].to_value) == (lo, hi)
+            else:
+                assert not d.floating_point_range, name
+        if spec.type is int and math.isfinite(hi):
+            assert (d.integer_range[0].from_value, d.integer_range[0].to_value) == (lo, hi)
     for name in ("node.publish_rate", "node.time_factor", "node.lock_step", "node.publish_clock",
                  "node.watchdog_timeout", "node.joint_name", "node.commands_interface", "node.record",
                  "node.diagnostics_rate", "preset"):
@@ -107,7 +111,7 @@ def test_params_file_preset_and_overrides(ros_context, ros_executor, tmp_path):
 @pytest.mark.parametrize("overrides, field, text", [
     ({"drive.bus_volage": 48.0}, "drive.bus_volage", "unknown parameter"),
     ({"node.publish_rat": 10.0}, "node.publish_rat", "unknown parameter"),
-    ({"drive.bus_voltage": 5000.0}, "drive.bus_voltage", "outside"),
+    ({"drive.bus_voltage": -5.0}, "drive.bus_voltage", "outside"),
     ({"drive.trip_temperature": 90.0}, "drive.trip_temperature", "derate_temperature"),
     ({"node.commands_interface": "velocity"}, "node.commands_interface", "effort, current"),
 ])

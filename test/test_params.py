@@ -32,7 +32,10 @@ def test_every_field_has_unit_range_description():
 
 
 @pytest.mark.parametrize("field,value,match", [
-    ("motor.phase_resistance", -0.1, r"motor.phase_resistance: -0.1 is outside \(0, 100\] ohm"),
+    ("motor.phase_resistance", -0.1, r"motor.phase_resistance: -0.1 is outside \(0, inf\) ohm \(physical limit; "
+                                     r"usual range \(0, 100\]\)"),
+    ("drive.modulation_limit", 1.2, r"drive.modulation_limit: 1.2 is outside \(0, 1\]"),
+    ("effects.coulomb_friction", -1.0, r"effects.coulomb_friction: -1.0 is outside \[0, inf\) N\*m"),
     ("drive.bus_voltage", "lots", r"drive.bus_voltage: expected a number \[V\]"),
     ("motor.pole_pairs", 7.5, r"motor.pole_pairs: expected an integer"),
     ("motor.winding", "star", r"motor.winding: expected one of wye, delta"),
@@ -99,3 +102,21 @@ def test_flat_names_cover_dataclasses():
     assert set(flat) == set(SPECS)
     assert from_flat(flat) == ActuatorParams()
     assert frames.voltage_limit_q(24.0, "wye") == pytest.approx(24.0 / math.sqrt(2))
+
+
+def test_bounds_are_sanity_limits_a_real_value_outside_them_is_accepted_with_a_warning(tmp_path):
+    """Issue #14: a 95 kg linear axis has 203.5 N s/m of viscous friction; the usual range [0, 100] is a sanity
+    limit, so the value is representable (and simulated), the YAML loader warns and names the field."""
+    from bldc_actuator.params import ParameterWarning, sanity_warnings
+
+    p = ActuatorParams().replace(**{"motor.viscous_damping": 203.5, "motor.rotor_inertia": 950.0})
+    assert p.motor.viscous_damping == 203.5 and p.motor.rotor_inertia == 950.0
+    msgs = sanity_warnings(p)
+    assert len(msgs) == 2 and any("motor.viscous_damping = 203.5" in m and "[0, 100]" in m for m in msgs)
+    assert sanity_warnings(ActuatorParams()) == []
+    path = tmp_path / "axis.yaml"
+    dump_yaml(p, path)
+    with pytest.warns(ParameterWarning) as caught:
+        assert load_yaml(path) == p
+    assert sorted(str(w.message).split(": ", 1)[1].split(" =")[0] for w in caught) == \
+        ["motor.rotor_inertia", "motor.viscous_damping"]

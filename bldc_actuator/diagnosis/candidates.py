@@ -520,8 +520,10 @@ def params_eripple(coef, cov, keys, variant, ctx):
     return {f"{name}_order_{o}_amplitude": {"value": amp, "sd": max(_sd(cov, 0), _sd(cov, 1)), "unit": unit,
                                             "field": None},
             f"{name}_order_{o}_phase": {"value": ph, "sd": float("nan"), "unit": "rad", "field": None},
-            "_cos": {"value": float(coef[0]), "sd": _sd(cov, 0), "unit": unit, "field": None},
-            "_sin": {"value": float(coef[1]), "sd": _sd(cov, 1), "unit": unit, "field": None}}
+            # per form: several forms of this effect may be accepted together, and their parameters are merged
+            # into one dict per effect (issue #14: the last form's coefficients were written for every form)
+            f"_{kind}_cos": {"value": float(coef[0]), "sd": _sd(cov, 0), "unit": unit, "field": None},
+            f"_{kind}_sin": {"value": float(coef[1]), "sd": _sd(cov, 1), "unit": unit, "field": None}}
 
 
 def params_load(coef, cov, keys, variant, ctx):

@@ -25,8 +25,12 @@ import numpy as np
 from ..params import SPECS, ActuatorParams
 from .refit import simulate_windows
 
-#: the core parameters refitted with the effects (those a short window of motion pins down)
+#: the core parameters a short window of motion pins down: refitted only when a finding changed them (issue #14:
+#: refitted always, K_t was written +61 % with J x20 on a joint whose K_t finding had been rejected)
 CORE_FIELDS = ("motor.torque_constant_q", "motor.rotor_inertia")
+#: an output-error value disagrees with its finding's equation-error value beyond this many combined standard
+#: deviations AND beyond the practical tolerance: the refit is then not kept, and the discrepancy reported
+AGREE_Z = 3.0
 #: held-out improvement the refit must show over the equation-error values to be kept
 MIN_GAIN = 0.01
 #: training windows the refit simulates (thinned evenly beyond this)
@@ -82,11 +86,45 @@ def _rms_pair(ctx, p: ActuatorParams, starts, length) -> tuple[float, ...]:
     return tuple(float(np.sqrt(np.mean((r[s] - r[m]) ** 2))) for _, s, m in _CHANNELS if r[m] is not None)
 
 
+def finding_values(parameters: dict[str, dict]) -> dict[str, tuple[float, float, str]]:
+    """field -> (value, sd, effect) of every accepted finding's parameter that is written into a field."""
+    out = {}
+    for effect, ps in parameters.items():
+        for info in ps.values():
+            fld = info.get("field") if isinstance(info, dict) else None
+            if fld and isinstance(info.get("value"), (int, float)):
+                sd = info.get("sd")
+                out[fld] = (float(info["value"]), float(sd) if isinstance(sd, (int, float)) else float("nan"), effect)
+    return out
+
+
+def discrepancies(fields: dict[str, dict], findings: dict[str, tuple[float, float, str]],
+                  tolerance: float) -> list[dict[str, Any]]:
+    """Fields whose output-error value disagrees with the accepted finding's value beyond :data:`AGREE_Z`
+    combined standard deviations and beyond ``tolerance`` (relative)."""
+    out = []
+    for f, r in fields.items():
+        if f not in findings:
+            continue
+        v, sd, effect = findings[f]
+        oe, sd_oe = r["output_error"], r["sd"]
+        band = AGREE_Z * math.sqrt((sd if math.isfinite(sd) else 0.0) ** 2 + (sd_oe if math.isfinite(sd_oe) else 0.0) ** 2)
+        if abs(oe - v) > max(band, tolerance * abs(v)):
+            out.append({"field": f, "effect": effect, "finding": v, "finding_sd": sd, "output_error": oe,
+                        "output_error_sd": sd_oe,
+                        "message": f"{f}: output error {oe:.4g} disagrees with the {effect} finding {v:.4g} ± "
+                                   f"{sd:.2g} (beyond {AGREE_Z:g} sd and {100 * tolerance:.0f} %)"})
+    return out
+
+
 def refit(ctx, nominal: ActuatorParams, updated: ActuatorParams, starts_train: list[int], starts_holdout: list[int],
-          length: float, *, max_nfev: int = 12) -> dict[str, Any]:
-    """Fit the fields the accepted effects changed plus :data:`CORE_FIELDS` by multiple shooting. Returns
-    ``{"available", "fields": {field: {"equation_error", "output_error", "sd"}}, "holdout": {"equation_error":
-    {velocity_rms, current_rms}, "output_error": {...}}, "kept", "reason", "params"}`` (``params``: the refitted
+          length: float, *, max_nfev: int = 12, findings: dict[str, tuple[float, float, str]] | None = None,
+          tolerance: float = 0.05) -> dict[str, Any]:
+    """Fit the fields the accepted effects changed (the core :data:`CORE_FIELDS` only when a finding changed them)
+    by multiple shooting. Kept when it simulates the held-out windows better AND every refitted value agrees with
+    its finding (``findings``: :func:`finding_values`; see :func:`discrepancies`). Returns ``{"available",
+    "fields": {field: {"equation_error", "output_error", "sd"}}, "holdout": {"equation_error": {velocity_rms,
+    current_rms}, "output_error": {...}}, "kept", "reason", "discrepancies", "params"}`` (``params``: the refitted
     :class:`ActuatorParams` when kept, else ``updated``)."""
     from scipy.optimize import least_squares
 
@@ -96,9 +134,10 @@ def refit(ctx, nominal: ActuatorParams, updated: ActuatorParams, starts_train: l
         pick = np.linspace(0, len(starts_train) - 1, MAX_TRAIN_WINDOWS).round().astype(int)
         starts_train = [starts_train[i] for i in pick]
     fields = changed_fields(nominal, updated)
-    fields += [f for f in CORE_FIELDS if f not in fields]
+    if not fields:
+        return {"available": False, "reason": "no simulator parameter changed by the findings", "params": updated}
     flat0 = updated.to_flat()
-    x_kind = {f: "log" if _split(f)[1] is None and flat0[f] > 0 and SPECS[f].range[0] >= 0 else "lin" for f in fields}
+    x_kind = {f: "log" if _split(f)[1] is None and flat0[f] > 0 and SPECS[f].limits[0] >= 0 else "lin" for f in fields}
     v0 = np.array([_flat_value(flat0, f) for f in fields])
     lin_scale = np.where(np.abs(v0) > 0, np.abs(v0), 1e-3)
 
@@ -112,8 +151,8 @@ def refit(ctx, nominal: ActuatorParams, updated: ActuatorParams, starts_train: l
         for f, v in zip(fields, vals):
             name, i = _split(f)
             if i is None:
-                lo, hi = SPECS[name].range
-                upd[name] = min(max(float(v), lo), hi)
+                lo, hi, lo_open = SPECS[name].limits
+                upd[name] = min(max(float(v), lo if not lo_open else lo + abs(lo) * 1e-9 + 1e-300), hi)
             else:       # one harmonic of a series: the others as they are
                 series = list(upd.get(name, flat0[name]))
                 series[i] = float(v)
@@ -156,14 +195,17 @@ def refit(ctx, nominal: ActuatorParams, updated: ActuatorParams, starts_train: l
     ho_oe = _rms_pair(ctx, p_oe, starts_holdout, length)
     not_worse = all(b <= a * (1 + MIN_GAIN) for a, b in zip(ho_ee, ho_oe))
     better = any(b < a * (1 - MIN_GAIN) for a, b in zip(ho_ee, ho_oe))
-    kept = bool(not_worse and better and sol.status >= 0)
+    out_fields = {f: {"equation_error": float(v), "output_error": float(vo), "sd": float(sd)}
+                  for f, v, vo, sd in zip(fields, v0, vals, sds)}
+    disc = discrepancies(out_fields, findings or {}, tolerance)
+    kept = bool(not_worse and better and sol.status >= 0 and not disc)
     reason = ("kept: the simulated held-out speed/current errors improve" if kept else
-              "not kept: the equation-error values simulate the held-out windows as well or better")
+              "not kept: " + "; ".join(d["message"] for d in disc) + " (the findings' values are written)" if disc
+              else "not kept: the equation-error values simulate the held-out windows as well or better")
     return {"available": True, "kept": kept, "reason": reason, "method": "multiple shooting, scipy least_squares",
             "windows": {"train": len(starts_train), "holdout": len(starts_holdout), "window_s": length},
             "evaluations": int(sol.nfev),
-            "fields": {f: {"equation_error": float(v), "output_error": float(vo), "sd": float(sd)}
-                       for f, v, vo, sd in zip(fields, v0, vals, sds)},
+            "fields": out_fields, "discrepancies": disc,
             "holdout": {"equation_error": dict(zip((c[0] for c in _CHANNELS), ho_ee)),
                         "output_error": dict(zip((c[0] for c in _CHANNELS), ho_oe))},
             "params": p_oe if kept else updated}

@@ -4,13 +4,15 @@
   velocity) refined by bounded 1-D search; covariance of every parameter from the Jacobian of the weighted
   residual (inflated by the residual's correlation time); correlations above 0.9 flagged.
 * :func:`updated_params` — accepted effects written onto :class:`~bldc_actuator.params.ActuatorParams` fields
-  (clipped into the schema's ranges, with a note when clipped); effects without schema fields are listed
-  as not simulated.
+  as fitted (clipped only into a field's physical limits; outside its usual range with a note: bounds are
+  sanity limits); effects without schema fields are listed as not simulated.
 * :func:`replay` — multiple shooting: the recording cut into short windows, each simulated by the
   :class:`~bldc_actuator.model.BatchActuator` (all windows and parameter sets in ONE batch) from the state
   measured at the window start, driven by the recorded commands and load (interpolated between the samples of
   a log slower than the joint controller); current, speed, angle and q-voltage errors (the voltage at the
-  recorded speed: the mechanical replay's back-EMF error removed).
+  recorded speed: the mechanical replay's back-EMF error removed). Each window starts in the simulated drive's
+  own steady state (:func:`window_start`); ``drive="current"`` replays the mechanical equation driven by the
+  measured current instead (nothing of the drive's internals needed).
 * :func:`thermal_error` — the two-node thermal network driven by the measured current vs recorded
   temperatures.
 """
@@ -25,7 +27,7 @@ import numpy as np
 
 from .. import effects, frames
 from ..model import BatchActuator
-from ..params import SPECS, ActuatorParams, from_flat
+from ..params import SPECS, ActuatorParams, from_flat, outside_usual_range
 from .candidates import Candidate
 from .equation_error import Context, Fit, thermal_response
 from .selection import SelectionResult, fit_model
@@ -218,6 +220,22 @@ def sensor_gains_for_q_ripple(c: float, s: float) -> tuple[float, float, float]:
     return 0.5 * diff, -0.5 * diff, share
 
 
+def _within_limits(spec, v, notes: list[str], fld: str):
+    """A fitted value for field ``spec``: clipped into its PHYSICAL limits only (a negative friction, a modulation
+    limit above 1), with a note; outside the usual (sanity) range it is written as fitted, with a note (issue
+    #14: a 95 kg axis's 203.5 N s/m is real)."""
+    lo, hi, lo_open = spec.limits
+    lo_eff = lo if not lo_open else (lo + abs(lo) * 1e-9 + 1e-300)
+    clipped = min(max(v, lo_eff), hi)
+    if clipped != v:
+        notes.append(f"{fld}: fitted {v:.4g} clipped into its physical limits [{lo:g}, {hi:g}] {spec.unit}")
+        v = clipped
+    if outside_usual_range(spec, v):
+        notes.append(f"{fld}: {v:.4g} {spec.unit} written as fitted, outside the usual range "
+                     f"[{spec.range[0]:g}, {spec.range[1]:g}] (a sanity limit, not physics)")
+    return v
+
+
 def updated_params(ctx: Context, sel: SelectionResult, pars: dict[str, dict], lib: dict[str, Candidate]):
     """New :class:`ActuatorParams` with the accepted effects switched on; returns (params, notes, not_simulated)."""
     flat = ctx.params.to_flat()
@@ -227,15 +245,16 @@ def updated_params(ctx: Context, sel: SelectionResult, pars: dict[str, dict], li
     for a in sel.accepted:
         cand = lib[a.effect]
         p = pars[a.effect]
-        if a.effect == "electrical_angle_ripple" and a.variant.hyper.get("kind") == "offset":
-            o_a, o_b = sensor_offsets_for_q_ripple(p["_cos"]["value"], p["_sin"]["value"])
+        kind = a.variant.hyper.get("kind")
+        if a.effect == "electrical_angle_ripple" and kind == "offset":
+            o_a, o_b = sensor_offsets_for_q_ripple(p["_offset_cos"]["value"], p["_offset_sin"]["value"])
             flat["drive.current_sensor_offset_a"] = flat["drive.current_sensor_offset_a"] + o_a
             flat["drive.current_sensor_offset_b"] = flat["drive.current_sensor_offset_b"] + o_b
             notes.append(f"electrical_angle_ripple (current-sensor offsets) written as drive.current_sensor_offset_a/_b "
                          f"+= {o_a:.4g} / {o_b:.4g} A: the simulated controller acts on the offset measurement")
             continue
-        if a.effect == "electrical_angle_ripple" and a.variant.hyper.get("kind") == "gain":
-            d_a, d_b, share = sensor_gains_for_q_ripple(p["_cos"]["value"], p["_sin"]["value"])
+        if a.effect == "electrical_angle_ripple" and kind == "gain":
+            d_a, d_b, share = sensor_gains_for_q_ripple(p["_gain_cos"]["value"], p["_gain_sin"]["value"])
             flat["drive.current_sensor_gain_a"] = flat["drive.current_sensor_gain_a"] + d_a
             flat["drive.current_sensor_gain_b"] = flat["drive.current_sensor_gain_b"] + d_b
             notes.append(f"electrical_angle_ripple (current-sensor gain mismatch) written as "
@@ -248,8 +267,8 @@ def updated_params(ctx: Context, sel: SelectionResult, pars: dict[str, dict], li
                     and not ctx.params.effects.cogging_order:
                 o = a.variant.hyper["order"]
                 flat["effects.cogging_order"] = o
-                flat["effects.cogging_cos"] = (p["_cos"]["value"],)
-                flat["effects.cogging_sin"] = (p["_sin"]["value"],)
+                flat["effects.cogging_cos"] = (p["_torque_cos"]["value"],)
+                flat["effects.cogging_sin"] = (p["_torque_sin"]["value"],)
                 notes.append(f"electrical_angle_ripple (order {o}, current-independent) written as a cogging-like "
                              f"term effects.cogging_order={o}")
             else:
@@ -285,13 +304,8 @@ def updated_params(ctx: Context, sel: SelectionResult, pars: dict[str, dict], li
             v = info["value"]
             if spec.type is int:
                 v = int(round(v))
-            lo, hi = spec.range
             if spec.type in (int, float):
-                lo_eff = lo if not spec.lo_open else (lo + abs(lo) * 1e-9 + 1e-300)
-                clipped = min(max(v, lo_eff), hi)
-                if clipped != v:
-                    notes.append(f"{fld}: fitted {v:.4g} clipped into its range [{lo:g}, {hi:g}] {spec.unit}")
-                    v = clipped
+                v = _within_limits(spec, v, notes, fld)
             flat[fld] = v
     try:
         newp = from_flat(flat)
@@ -335,13 +349,15 @@ def windows(ctx: Context, length: float, max_windows: int, which: str) -> list[i
     return starts
 
 
-def replay(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], length: float) -> list[dict[str, Any]]:
+def replay(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], length: float,
+           drive: str = "closed_loop") -> list[dict[str, Any]]:
     """Simulate every window under every parameter set (one BatchActuator); per set: RMS error of current
     [A], speed [rad/s] and angle [rad] against the (low-passed) measurements, and the traces of the first
-    windows for plots."""
+    windows for plots. ``drive``: ``closed_loop`` (the drive emulated from the recorded commands) or ``current``
+    (the mechanical equation driven by the measured current, :func:`simulate_windows`)."""
     if not starts or "i_q" not in ctx.sig or "omega" not in ctx.sig:
         return [{"available": False} for _ in param_sets]
-    r = simulate_windows(ctx, param_sets, starts, length)
+    r = simulate_windows(ctx, param_sets, starts, length, drive=drive)
     nW, nP = len(starts), len(param_sets)
     sim_i, sim_w, sim_th, sim_v = r["sim_i"], r["sim_w"], r["sim_th"], r["sim_v"]
     meas_i, meas_w, meas_th, meas_v, idx = r["meas_i"], r["meas_w"], r["meas_th"], r["meas_v"], r["idx"]
@@ -370,12 +386,20 @@ def replay(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], le
     return out
 
 
-def simulate_windows(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], length: float) -> dict:
+def simulate_windows(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], length: float,
+                     drive: str = "closed_loop") -> dict:
     """Multiple shooting: every window started from the recorded state and simulated under every parameter set
     in ONE :class:`BatchActuator` run (one per group of sets that share the current-loop rate and delay, which a
     batch cannot mix). Returns the simulated and measured (low-passed) current, speed, angle and q voltage (and
     the simulated d current ``sim_id``) as ``(samples, sets x windows)`` arrays (set-major columns) and the
-    sample indices."""
+    sample indices.
+
+    ``drive="closed_loop"``: the drive emulated (its PI current loop from the recorded command, started in its
+    own steady state, :func:`window_start`). ``drive="current"``: what a torque-side effect needs and nothing the
+    user rarely knows — the drive's internals — the mechanical equation driven by ``K i`` with the MEASURED
+    current (:func:`mechanical_replay_params`); the simulated current is then the measured one."""
+    if drive == "current":
+        return _simulate_current_driven(ctx, param_sets, starts, length)
     L = max(5, int(round(length * ctx.fs)))
     nW = len(starts)
     plist = []
@@ -403,6 +427,106 @@ def simulate_windows(ctx: Context, param_sets: list[ActuatorParams], starts: lis
             "meas_v": meas_v, "idx": idx}
 
 
+
+#: the torque constant of the electrical side in a current-driven replay [V*s/rad]: the kernel's winding is kept
+#: (its equations are the mechanical one's neighbours), but with no current and no back-EMF it exchanges nothing
+_INERT_K = 1e-12
+
+
+def mechanical_replay_params(p: ActuatorParams) -> ActuatorParams:
+    """``p`` with an inert electrical side, for the current-driven replay: the motor's torque ``K(T_h, i) i N``
+    from the measured current enters the kernel as an external (negative) output load, so every torque-side
+    term — inertia, viscous and iron-loss drag, friction with stick/slip, cogging, position loads — is the
+    kernel's own (one implementation of the equations)."""
+    return p.replace(**{"motor.torque_constant_q": _INERT_K, "drive.dead_time": 0.0,
+                        "drive.current_sensor_offset_a": 0.0, "drive.current_sensor_offset_b": 0.0,
+                        "drive.current_sensor_gain_a": 1.0, "drive.current_sensor_gain_b": 1.0,
+                        "effects.kt_saturation": 0.0})
+
+
+def true_current(ctx: Context, p: ActuatorParams) -> tuple[np.ndarray, np.ndarray]:
+    """The winding d/q current [A] behind the recorded (sensor) current under ``p``'s sensor offsets and gains
+    (the sensor model inverted sample by sample; the recorded current when the sensors are ideal)."""
+    from .. import kernel
+
+    S = ctx.sig
+    i_d, i_q = np.asarray(S["i_d"], float), np.asarray(S["i_q"], float)
+    d = p.drive
+    if not (d.current_sensor_offset_a or d.current_sensor_offset_b or d.current_sensor_gain_a != 1.0
+            or d.current_sensor_gain_b != 1.0):
+        return i_d, i_q
+    th_e = p.motor.pole_pairs * np.asarray(S["theta"], float)
+    args = (d.current_sensor_offset_a, d.current_sensor_offset_b, d.current_sensor_gain_a, d.current_sensor_gain_b)
+    f = np.vectorize(lambda x, y, th: kernel.measured_current_dq(x, y, th, *args), otypes=[float, float])
+    z = np.zeros_like(th_e)
+    m0d, m0q = f(z, z, th_e)
+    a_d, a_q = f(z + 1.0, z, th_e)
+    b_d, b_q = f(z, z + 1.0, th_e)
+    a_d, a_q, b_d, b_q = a_d - m0d, a_q - m0q, b_d - m0d, b_q - m0q
+    det = a_d * b_q - b_d * a_q
+    rd, rq = i_d - m0d, i_q - m0q
+    return (b_q * rd - b_d * rq) / det, (a_d * rq - a_q * rd) / det
+
+
+def _simulate_current_driven(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], length: float) -> dict:
+    L = max(5, int(round(length * ctx.fs)))
+    nW = len(starts)
+    S = ctx.sig
+    use_sensor = "torque" in ctx.have
+    w_meas = S["omega_s"]
+    st_one = np.asarray(starts, int)
+    last = len(ctx.t) - 1
+    n_sub = replay_substeps(ctx.fs)
+    dt = 1.0 / ctx.fs
+    ext = ctx.raw["torque"] if use_sensor else (ctx.raw["load_torque"] if "load_torque" in ctx.have else None)
+    plist, drive_torque = [], []
+    for p in param_sets:
+        if use_sensor:   # the sensor measures the load: the modelled load must not count twice
+            p = p.replace(**{"load.load_torque": 0.0, "load.gravity_torque": 0.0, "load.spring_stiffness": 0.0})
+        m = p.motor
+        # the low-passed current (the equation error's band): the sensor noise above it, integrated over a
+        # window, would be a speed random walk larger than most effects
+        i_q = true_current(ctx, p)[1]
+        if "i_q_torque" in S:       # aligned with the motion (search): the torque's timing, not the sample's
+            i_q = i_q + (S["i_q_torque"] - S["i_q"])
+        i_q = ctx.dec.lowpass(i_q)
+        K = m.torque_constant_q * effects.flux_factor(S["T_h"], m.reference_temperature,
+                                                      m.magnet_temperature_coefficient, m.magnet_temperature_enabled)
+        K = K * effects.saturation_factor(i_q, p.effects.kt_saturation)
+        tau_out = K * i_q * p.gear.gear_ratio                      # the motor's torque at the output
+        drive_torque.append(tau_out - (ext if ext is not None else 0.0))
+        plist.append(mechanical_replay_params(p))
+    groups: dict[tuple, list[int]] = {}
+    for j, p in enumerate(plist):
+        groups.setdefault((p.drive.current_loop_rate, p.drive.current_loop_delay), []).append(j)
+    cols_all = len(plist) * nW
+    sims = {k: np.zeros((L, cols_all)) for k in ("sim_i", "sim_w", "sim_th", "sim_v", "sim_id")}
+    i_lp = ctx.dec.lowpass(S["i_q"])
+    for js in groups.values():
+        b = BatchActuator([plist[j] for j in js for _ in range(nW)])
+        st = np.tile(st_one, len(js))
+        b.set_state(i_d=0.0, i_q=0.0, omega=w_meas[st], theta=S["theta"][st], T_winding=S["T_w"][st],
+                    T_housing=S["T_h"][st])
+        tau = np.vstack([drive_torque[j] for j in js])            # (sets in group, samples)
+        rows = np.repeat(np.arange(len(js)), nW)
+        cols = np.concatenate([np.arange(j * nW, (j + 1) * nW) for j in js])
+        for k in range(L):
+            a, z = st + k, np.minimum(st + k + 1, last)
+            for jj in range(n_sub):
+                # the torque over the sub-step: the measured current at its midpoint (aligned with the motion
+                # in search: a current at sample k acts around t_k)
+                f = (jj + 0.5) / n_sub
+                b.set_load_torque(-(tau[rows, a] + f * (tau[rows, z] - tau[rows, a])))
+                b.step(dt / n_sub)
+            sims["sim_w"][k, cols] = b.field("omega")
+            sims["sim_th"][k, cols] = b.field("theta")
+    idx_one = st_one[None, :] + np.arange(1, L + 1)[:, None]
+    idx = np.tile(idx_one, (1, len(plist)))
+    sims["sim_i"][:] = i_lp[idx]            # the current is the recording's (not simulated)
+    sims["sim_v"][:] = np.nan
+    return {**sims, "meas_i": i_lp[idx], "meas_w": w_meas[idx], "meas_th": S["theta"][idx], "meas_v": None,
+            "idx": idx}
+
 #: a log slower than this [Hz] holds samples of commands that changed between them (the joint controller runs
 #: at 1 kHz or faster): the replay interpolates them linearly over sub-steps of at most 1 / this
 REPLAY_HOLD_RATE = 500.0
@@ -414,6 +538,69 @@ def replay_substeps(fs: float) -> int:
     return 1 if fs >= REPLAY_HOLD_RATE else int(math.ceil(REPLAY_HOLD_RATE / fs))
 
 
+
+@dataclass
+class WindowStart:
+    """The drive's and the plant's state at the start of replay windows (one entry per column)."""
+
+    i_d: np.ndarray      #: true winding d current [A] (the sensors' reading inverted)
+    i_q: np.ndarray      #: true winding q current [A]
+    v: np.ndarray        #: applied d/q voltage (complex) [V], inside the inverter's circle
+    z: np.ndarray        #: PI integrators (complex) [V]
+    K: np.ndarray        #: the plant's torque / back-EMF constant at the start [V*s/rad]
+
+
+def window_start(plist: list[ActuatorParams], i_d_meas, i_q_meas, omega, theta, T_w, T_h) -> WindowStart:
+    """Steady state of each parameter set's drive at a recorded state (issue #14, symptom 1): the current the
+    sensors report is inverted through that set's sensor offsets and gains (the plant starts with the true
+    current), the applied voltage is the plant's steady voltage for that current and speed — R(T_w) i, the
+    cross-coupling p ω L i and back-EMF K(T_h, i_q) ω — limited to the
+    inverter's circle as the drive limits it (``drive.voltage_limit_mode``, ``drive.modulation_limit``), and the
+    PI integrators hold what that drive's integrators hold there: the applied voltage less the decoupling
+    feed-forward when ``drive.decoupling_enabled`` (R i), the whole voltage without it (R i + K ω: a drive without
+    feed-forward carries the back-EMF in its integrator); at the limit the back-calculation anti-windup leaves
+    the PI output on the circle. The delayed voltage (``drive.current_loop_delay``) is the same held voltage.
+    Started otherwise every window opens with a current transient that grows with K ω and makes the right K look
+    wrong. The dead-time error is left out: it flips with the sign of each phase current, which a low-passed
+    current near zero does not resolve (held in the start it made the first milliseconds 20 x worse on a drive
+    with 1 µs dead time; the integrator finds it within a few loop periods)."""
+    from .. import kernel
+
+    n = len(plist)
+    i_d = np.array(i_d_meas, float).copy()
+    i_q = np.array(i_q_meas, float).copy()
+    omega, theta = np.asarray(omega, float), np.asarray(theta, float)
+    K = np.zeros(n)
+    v = np.zeros(n, complex)
+    z = np.zeros(n, complex)
+    for c, p in enumerate(plist):
+        m, d = p.motor, p.drive
+        th_e = m.pole_pairs * float(theta[c])
+        if d.current_sensor_offset_a or d.current_sensor_offset_b or d.current_sensor_gain_a != 1.0 \
+                or d.current_sensor_gain_b != 1.0:
+            f = lambda x, y: np.array(kernel.measured_current_dq(x, y, th_e, d.current_sensor_offset_a,  # noqa: E731
+                                                                   d.current_sensor_offset_b, d.current_sensor_gain_a,
+                                                                   d.current_sensor_gain_b))
+            m0 = f(0.0, 0.0)
+            M = np.column_stack([f(1.0, 0.0) - m0, f(0.0, 1.0) - m0])
+            i_d[c], i_q[c] = np.linalg.solve(M, np.array([i_d[c], i_q[c]]) - m0)
+        R = effects.resistance_at(m.phase_resistance, float(T_w[c]), m.reference_temperature,
+                                  m.copper_temperature_coefficient, m.resistance_temperature_enabled)
+        Kc = m.torque_constant_q * effects.flux_factor(float(T_h[c]), m.reference_temperature,
+                                                       m.magnet_temperature_coefficient, m.magnet_temperature_enabled)
+        Kc = float(Kc * effects.saturation_factor(i_q[c], p.effects.kt_saturation))
+        w = float(omega[c])
+        i = complex(i_d[c], i_q[c])
+        v_plant = (R + 1j * m.pole_pairs * w * m.q_inductance) * i + 1j * Kc * w
+        v_max = frames.voltage_limit_q(d.bus_voltage, m.winding) * d.modulation_limit
+        v_app = kernel.limit_voltage(v_plant, v_max, float(kernel.VOLTAGE_LIMIT_MODES.index(d.voltage_limit_mode)))
+        # the feed-forward acts on the MEASURED current with the nominal-temperature K of the drive's parameters
+        i_m = complex(float(np.asarray(i_d_meas)[c]), float(np.asarray(i_q_meas)[c]))
+        v_ff = 1j * (m.pole_pairs * w * m.q_inductance * i_m + m.torque_constant_q * w) if d.decoupling_enabled else 0j
+        K[c], v[c], z[c] = Kc, v_app, v_app - v_ff
+    return WindowStart(i_d, i_q, v, z, K)
+
+
 def _simulate_batch(ctx: Context, plist: list[ActuatorParams], st: np.ndarray, L: int, i_meas: np.ndarray,
                     cmd: np.ndarray, load: np.ndarray | None) -> dict:
     """One :class:`BatchActuator` over windows starting at ``st`` (one parameter set per column), driven by the
@@ -421,24 +608,12 @@ def _simulate_batch(ctx: Context, plist: list[ActuatorParams], st: np.ndarray, L
     b = BatchActuator(plist)
     S = ctx.sig
     w_meas = S["omega_s"]
-    # the resistance and flux at each window's temperatures, as the kernel evaluates them (effects.py): the
-    # initial voltage and PI integrator must hold the drop the model's own plant has there, else every window
-    # starts with a current sag that is the initialisation's, not the model's (issue #7, R(T) judged worse)
     T_w0, T_h0 = S["T_w"][st], S["T_h"][st]
-    K = np.array([p.motor.torque_constant_q * effects.flux_factor(th, p.motor.reference_temperature,
-                                                                    p.motor.magnet_temperature_coefficient,
-                                                                    p.motor.magnet_temperature_enabled)
-                  for p, th in zip(plist, T_h0)])
-    R = np.array([effects.resistance_at(p.motor.phase_resistance, tw, p.motor.reference_temperature,
-                                        p.motor.copper_temperature_coefficient, p.motor.resistance_temperature_enabled)
-                  for p, tw in zip(plist, T_w0)])
-    Lq = np.array([p.motor.q_inductance for p in plist])
-    pp = np.array([p.motor.pole_pairs for p in plist])
-    i_q0, w0 = i_meas[st], w_meas[st]
-    i_d0 = ctx.dec.lowpass(S["i_d"])[st]
-    b.set_state(i_d=i_d0, i_q=i_q0, omega=w0, theta=S["theta"][st], T_winding=T_w0,
-                T_housing=T_h0, v_d=R * i_d0 - pp * w0 * Lq * i_q0,
-                v_q=R * i_q0 + K * w0 + pp * w0 * Lq * i_d0, z_d=R * i_d0, z_q=R * i_q0, i_q_ref=cmd[st])
+    i_d_meas0 = ctx.dec.lowpass(S["i_d"])[st]
+    ws = window_start(plist, i_d_meas0, i_meas[st], w_meas[st], S["theta"][st], T_w0, T_h0)
+    K = ws.K
+    b.set_state(i_d=ws.i_d, i_q=ws.i_q, omega=w_meas[st], theta=S["theta"][st], T_winding=T_w0, T_housing=T_h0,
+                v_d=ws.v.real, v_q=ws.v.imag, z_d=ws.z.real, z_q=ws.z.imag, i_q_ref=cmd[st])
     dt = 1.0 / ctx.fs
     sensed = any(p.drive.current_sensor_offset_a or p.drive.current_sensor_offset_b
                  or p.drive.current_sensor_gain_a != 1.0 or p.drive.current_sensor_gain_b != 1.0 for p in plist)
@@ -652,9 +827,7 @@ def apply_thermal(params: ActuatorParams, thermal: dict[str, Any]):
             flat.update(f["updated_fields"])
         elif f["effect"] in ("thermal_parameters", "voltage_saturation", "iron_loss") and f.get("simulated"):
             for name, fld in f["fields"].items():
-                spec = SPECS[fld]
-                lo, hi = spec.range
-                flat[fld] = min(max(f["parameters"][name], lo * (1 + 1e-9) + 1e-300), hi)
+                flat[fld] = _within_limits(SPECS[fld], f["parameters"][name], notes, fld)
             if f["effect"] == "iron_loss":
                 # the nominal friction and damping already hold the total drag a test measured: the iron terms
                 # take their share of it (and heat the stator), the rest stays friction

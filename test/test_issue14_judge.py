@@ -1,0 +1,103 @@
+"""Issue #14, symptom 1: the replay's window start must be the steady state of the drive being simulated, for
+every drive option the model has (decoupling on/off, sensor offsets and gains, dead time, loop delay, the
+voltage-limit modes at the limit). Recordings from the project's own closed-loop Actuator under the truth; the
+replay (multiple shooting from recorded states) under the TRUE parameters must then start without a transient
+and beat the nominal ones."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from bldc_actuator.diagnosis import equation_error as ee
+from bldc_actuator.diagnosis import refit
+from bldc_actuator.diagnosis.pipeline import DiagnoseOptions, diagnose
+from bldc_actuator.params import ActuatorParams
+
+from test_issue14_judge_helpers import closed_loop_recording
+
+BASE = ActuatorParams().replace(**{"gear.gear_ratio": 9.0})
+
+
+def reference(t):
+    """Motor-side angle [rad]: slow large swings (up to ~30 rad/s) and faster small ones."""
+    return 3 * np.sin(2 * np.pi * 0.4 * t) + 1.5 * np.sin(2 * np.pi * 1.3 * t) + 8 * np.sin(2 * np.pi * 0.11 * t)
+
+
+def _ctx(sig, p):
+    return ee.prepare([(sig, False)], p)
+
+
+def test_no_decoupling_delta_drive_the_true_torque_constant_replays_best_and_is_accepted():
+    """The issue's case: a delta drive without back-EMF feed-forward, K_t sqrt(3/2) above nominal. Started with
+    ``z_q = R i`` every window opened with a current transient growing with K omega (replay speed error:
+    nominal 1.28, TRUE K 1.79 rad/s). The drive's integrator holds R i + K omega: the true K now replays an
+    order of magnitude better, and diagnose accepts and writes it."""
+    nom = BASE.replace(**{"motor.winding": "delta", "drive.decoupling_enabled": False})
+    true = nom.replace(**{"motor.torque_constant_q": nom.motor.torque_constant_q * math.sqrt(1.5)})
+    sig = closed_loop_recording(true, nom, reference, duration=20.0, seed=1)
+    ctx = _ctx(sig, nom)
+    starts = refit.windows(ctx, 0.1, 120, "all")
+    r = refit.replay(ctx, [nom, true], starts, 0.1)
+    assert r[1]["velocity_rms"] < 0.2 * r[0]["velocity_rms"], (r[0]["velocity_rms"], r[1]["velocity_rms"])
+    rep = diagnose(sig, nom, options=DiagnoseOptions())
+    assert [f["effect"] for f in rep.to_dict()["findings"]] == ["torque_constant_error"]
+    assert rep.updated_params.motor.torque_constant_q == pytest.approx(true.motor.torque_constant_q, rel=0.01)
+
+
+DRIVES = {
+    "decoupling_off_wye": {"drive.decoupling_enabled": False},
+    "sensor_gain_and_offset": {"drive.current_sensor_gain_a": 1.06, "drive.current_sensor_gain_b": 0.95,
+                               "drive.current_sensor_offset_a": 0.15},
+    "dead_time": {"drive.dead_time": 1e-6},
+    "loop_delay_no_decoupling": {"drive.current_loop_delay": 1e-4, "drive.decoupling_enabled": False},
+    "q_priority_at_the_limit": {"drive.voltage_limit_mode": "q_priority", "drive.bus_voltage": 3.0},
+    "d_priority_at_the_limit_no_decoupling": {"drive.voltage_limit_mode": "d_priority", "drive.bus_voltage": 3.0,
+                                              "drive.decoupling_enabled": False},
+}
+
+
+@pytest.mark.parametrize("name", sorted(DRIVES))
+def test_every_window_starts_in_the_drives_own_steady_state(name):
+    """Replayed under the parameters that made the recording, the simulated current of the first 3 ms of each
+    window follows the recording to the sensor noise (0.03 A): no start transient, whatever the drive option
+    (the old start, ``z = R i`` whatever the drive, gave 0.048 A for decoupling off and 0.069 A for d priority
+    at the limit without decoupling; all are now 0.019-0.021 A, dead time 0.038 A)."""
+    truth = BASE.replace(**DRIVES[name])
+    sig = closed_loop_recording(truth, truth, reference, duration=8.0, seed=3, noise_i=0.03)
+    ctx = _ctx(sig, truth)
+    starts = refit.windows(ctx, 0.1, 60, "all")
+    sim = refit.simulate_windows(ctx, [truth], starts, 0.1)
+    head = sim["sim_i"][:3] - sim["meas_i"][:3]
+    err = float(np.sqrt(np.mean(head ** 2)))
+    # dead time: the start leaves its error to the integrator (a low-passed current does not resolve the signs)
+    assert err < (0.05 if name == "dead_time" else 0.035), err
+    if "limit" in name:   # windows start at the voltage limit (else the case tests nothing)
+        v = np.hypot(sig.channels["voltage_q"], sig.channels["voltage_d"])
+        assert np.sum(v[np.array(starts)] > 0.97 * 3.0 / math.sqrt(2)) >= 1
+
+
+def test_a_drive_unlike_the_users_parameters_is_judged_by_the_measured_current():
+    """Coulomb friction behind a drive whose parameters the user got wrong (the file says a 0.15 A current
+    limit; the drive limits at 20 A): the emulated drive clips its commands and misses the recorded current
+    (the drive check, reported as a number, fails), so the torque-side finding is judged by the mechanical
+    equation driven by the MEASURED current, which needs nothing of the drive, and confirmed (before: refused,
+    "not checkable in simulation", the emulated drive's speed error 52 % of the recorded speed)."""
+    nominal = BASE
+    truth = nominal.replace(**{"effects.coulomb_friction": 0.02})
+    user = nominal.replace(**{"drive.current_limit": 0.15})
+    sig = closed_loop_recording(truth, nominal, reference, duration=16.0, seed=5)
+    rep = diagnose(sig, user, options=DiagnoseOptions())
+    f = rep.finding("coulomb_friction")
+    assert f is not None and f["parameters"]["coulomb_friction"] == pytest.approx(0.02, rel=0.02)
+    sim = f["simulation"]
+    assert sim["verdict"] == "confirmed" and sim["replay"].startswith("mechanical equation driven by the measured")
+    chk = sim["drive_check"]
+    assert not chk["ok"] and chk["current_error_rms"] > 2 * chk["current_noise"]
+    assert sim["with"] < 0.05 * sim["without"]
+    # the drive described right: the emulation reproduces the current and judges as before
+    rep2 = diagnose(sig, nominal, options=DiagnoseOptions())
+    sim2 = rep2.finding("coulomb_friction")["simulation"]
+    assert sim2["drive_check"]["ok"] and sim2["replay"].startswith("closed-loop") and sim2["verdict"] == "confirmed"
