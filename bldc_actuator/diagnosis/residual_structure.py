@@ -2,8 +2,8 @@
 where does it sit?
 
 For each model equation, the final equation-error residual is explained by bin means (bins learnt on the training
-rows, judged on the held-out rows, so noise cannot pass) of one signal at a time: time, speed, current,
-acceleration and the mechanical angle; and its power spectrum says which frequency band holds most of it. A
+rows, judged on the held-out rows, so noise cannot pass) of one signal at a time: time, speed, current
+(command) and the mechanical angle; and its power spectrum says which frequency band holds most of it. A
 residual is *structured* when one signal's bins explain at least :data:`MIN_EXPLAINED` of its held-out variance,
 or when a frequency band holds that much more of its held-out power than a flat spectrum would, and *large*
 when that structured part is at least :data:`MIN_SIZE` of the equation's own signal (the current for
@@ -26,9 +26,10 @@ N_BINS = 12
 _SIGNAL = {"mechanical": ("i_q", "the current"), "electrical": ("v_q", "v_q")}
 #: explanatory signal -> (derived signal name, label, unit)
 #: (the current coordinate is the aligned current command: binning by the measured current would bin its own noise,
-#: which every equation's residual carries)
+#: which every equation's residual carries; acceleration is left out for the same reason: it is differentiated from
+#: the angle, and its noise is in the mechanical residual through J dω/dt)
 _WHERE = (("time", None, "time", "s"), ("speed", "omega", "speed", "rad/s"), ("current", "i_inst", "current", "A"),
-          ("acceleration", "omega_dot", "acceleration", "rad/s^2"), ("angle", "theta", "mechanical angle", "rad"))
+          ("angle", "theta", "mechanical angle", "rad"))
 
 
 @dataclass
