@@ -101,7 +101,7 @@ def ak80_angle(data: Path, out: Path) -> dict:
             "held_out": "; ".join(heldout),
             "not_checked": "direction-dependent torque: all trials back-drive in one direction (Coulomb = "
                            "offset = K_t error here); voltage, temperature absent",
-            "report": d, "static_ratio": ratio_static}
+            "verdict": d["verdict"], "report": d, "static_ratio": ratio_static}
 
 
 # -- AK80-9 MIT torque log with motion both ways: direction-dependent torque -----------------------
@@ -137,7 +137,7 @@ def ak80_direction(data: Path, out: Path) -> dict:
             "parameters": "; ".join(params_txt) or "—", "frame_factor": ff,
             "held_out": "; ".join(heldout) or "—",
             "not_checked": "; ".join(f"{x['effect']}: {x['reason']}" for x in d["not_checkable"]) or "—",
-            "report": d}
+            "verdict": d["verdict"], "report": d}
 
 
 # -- AK80-9 servo efficiency runs: steady-state fits + voltage saturation --------------------------
@@ -364,8 +364,11 @@ def main(argv=None) -> int:
         row["seconds"] = time.time() - t0
         rows.append(row)
         print(f"[{row['seconds']:.1f} s] {name}", file=sys.stderr)
-    cols = ["dataset", "found", "parameters", "frame_factor", "held_out", "not_checked"]
-    head = "| dataset | found (plain words) | fitted parameters ± 1σ | frame factor | held-out before → after | not checked (why) |"
+    cols = ["dataset", "found", "parameters", "frame_factor", "held_out", "not_checked", "verdict"]
+    for r in rows:
+        r.setdefault("verdict", "— (steady-state fit, not the diagnose pipeline)")
+    head = ("| dataset | found (plain words) | fitted parameters ± 1σ | frame factor | held-out before → after | "
+            "not checked (why) | diagnose verdict |")
     table = [head, "|" + "---|" * len(cols)]
     for r in rows:
         table.append("| " + " | ".join(str(r[k]).replace("|", "/") for k in cols) + " |")
