@@ -303,7 +303,7 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, max_harmonics: int =
 
     # cogging: the order of the peak of the friction-only residual's angle-order spectrum. Over a span of R
     # revolutions orders are resolved to about 1/R: the peak is reported with that uncertainty (the -3 dB half
-    # width of its lobe), not refused for a short span; an order needs >= MIN_PERIODS periods in the span
+    # width of its lobe, ~0.443/R), not refused for a short span; an order needs >= MIN_PERIODS periods in the span
     cog_terms = []
     spectrum = None
     kmin = max(1.0, MIN_PERIODS / max(revs, 1e-9))
@@ -317,7 +317,8 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, max_harmonics: int =
         order = int(round(k_peak))
         floor = float(np.median(amps_k))
         peak_amp = float(amps_k[i])
-        order_sd = _half_width(ks, amps_k, i)
+        # on the integer grid (>= 4 revolutions) the lobe is narrower than the grid: its -3 dB half width 0.443/R
+        order_sd = 0.443 / revs if revs >= 4.0 else _half_width(ks, amps_k, i)
         stands_out = peak_amp >= PEAK_OVER_MEDIAN * floor
         consistent, why = _consistent(th, r, order, om, both_ways)
         spectrum = {"order": k_peak, "order_sd": order_sd, "amplitude": peak_amp,

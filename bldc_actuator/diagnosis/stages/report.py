@@ -146,9 +146,13 @@ def run(signals, params, s: Search, j: Judgement, m: Model, options, say: Say, t
     why = next((j.simulation[e]["verdict"].split(": ", 1)[1] for e in unreproduced
                 if "does not reproduce" in j.simulation.get(e, {}).get("verdict", "")), None)
     clipped = decidability.clipped(getattr(signals, "meta", {}))
-    reasons = [u for u in (clipped,
-                           decidability.base_replay(s.replay_nominal, (replay_ho or {}).get("after") if findings
-                                                    else None),
+    base_replay = decidability.base_replay(s.replay_nominal, (replay_ho or {}).get("after") if findings else None)
+    if base_replay is not None and findings and all(f.get("not_checkable_in_simulation") for f in findings):
+        # the judge found the motion imposed from outside (a torque sensor): the simulation is not the judge here,
+        # so its failure to follow is a caveat, not a reason to distrust the findings
+        base_replay.blocking = False
+        base_replay.reason += " (the motion is imposed from outside: every finding is not checkable in simulation)"
+    reasons = [u for u in (clipped, base_replay,
                            # (windows lost to a clipped current are said by the clipped reason)
                            None if clipped else decidability.holdout(s.starts_holdout, options.window_s,
                                                                      options.replay)) if u is not None]
@@ -229,7 +233,7 @@ def torque_balance(signals, params, res, options, say: Say, t_start: float) -> D
     reasons = []
     if res.r2 == res.r2 and res.r2 < 0.5:
         reasons.append(Undecidable("balance_explains_little",
-                                   f"the torque balance explains only {100 * res.r2:.0f} % of the torque variance "
+                                   f"the torque balance explains only {max(0.0, 100 * res.r2):.0f} % of the torque variance "
                                    f"(the motor was probably powered: its own torque is not logged without current)",
                                    "log the motor current, or turn the motor unpowered"))
     if not res.held_out:
