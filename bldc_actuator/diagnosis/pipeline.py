@@ -14,7 +14,13 @@ recording:
 * :mod:`.stages.refit` — output-error refit (multiple shooting) and the updated parameter file.
 * :mod:`.stages.report` — findings, before/after, the :class:`.report.DiagnosisReport`.
 
-One progress line per step on stderr when ``options.progress``.
+The route is chosen from the channels (:func:`route`): a log with torque and motion but no motor current goes
+to the torque balance (:mod:`.torque_balance`), reported by :func:`.stages.report.torque_balance` in the same
+:class:`DiagnosisReport` schema. The CLI and ``fleet`` both call :func:`diagnose`. Every report ends in one of
+three verdicts (:mod:`.results`: found / nothing missing / not decidable with the reasons of
+:mod:`.decidability`, including a structured residual outside the catalogue, :mod:`.residual_structure`).
+
+One progress line per step on stderr when ``options.progress``, numbered alike on both routes (``k/6``).
 
 Usage::
 

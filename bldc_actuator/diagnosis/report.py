@@ -166,9 +166,10 @@ def _markdown(r: DiagnosisReport, images: dict[str, str]) -> str:
     L = ["# Diagnosis report", "", f"**Verdict: {r.verdict}**", ""]
     s = r.setup
     if s:
+        filt = (f"parallel low-pass {_g(s.get('cutoff_hz'))} Hz, decimation x{s.get('decimation')} "
+                f"({s.get('decimated_samples')} samples for statistics); " if s.get("cutoff_hz") else "")
         L += [f"Recording `{s.get('source', '')}`: {s.get('samples')} samples at {_g(s.get('rate_hz'))} Hz; "
-              f"parallel low-pass {_g(s.get('cutoff_hz'))} Hz, decimation x{s.get('decimation')} "
-              f"({s.get('decimated_samples')} samples for statistics); held-out: {s.get('holdout')}.", "",
+              f"{filt}held-out: {s.get('holdout')}. Route: {r.method}.", "",
               f"Channels: {', '.join(r.channels)}.", ""]
     if r.verdict_kind == NOT_DECIDABLE or r.verdict_record.undecidable:
         L += ["## Not decidable" if r.verdict_kind == NOT_DECIDABLE else "## Caveats", ""]

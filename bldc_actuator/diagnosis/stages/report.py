@@ -207,6 +207,11 @@ def run(signals, params, s: Search, j: Judgement, m: Model, options, say: Say, t
     return report
 
 
+#: torque-balance parameter -> parameter-file field (what :func:`..torque_balance.updated_params` writes)
+_TB_FIELDS = {"coulomb_friction": "effects.coulomb_friction", "viscous_damping": "motor.viscous_damping",
+              "rotor_inertia": "motor.rotor_inertia", "cogging_order": "effects.cogging_order"}
+
+
 def torque_balance(signals, params, res, options, say: Say, t_start: float) -> DiagnosisReport:
     """The report of the torque-balance route (:mod:`..torque_balance`: torque and motion, no current) in the
     same schema as the full route: findings, rejected, not checkable, data issues, ``compare``, the verdict."""
@@ -223,9 +228,10 @@ def torque_balance(signals, params, res, options, say: Say, t_start: float) -> D
                       f"{o['revolutions']:.2f} revolution(s)")
         findings.append({"effect": x.effect, "description": f"{x.effect.replace('_', ' ')} (torque balance)",
                          "form": "torque balance", "parameters": x.parameters, "uncertainty": x.uncertainty,
-                         "units": x.units, "fields": {}, "simulated": True, "evidence": ev,
-                         "held_out": dict(x.held_out, metric="torque error RMS (held-out)"),
-                         "metrics": [dict(x.held_out, metric="torque error RMS (held-out)")],
+                         "units": x.units, "fields": {k: _TB_FIELDS[k] for k in x.parameters if k in _TB_FIELDS},
+                         "simulated": True, "evidence": ev,
+                         "held_out": dict(x.held_out, metric="torque error RMS"),
+                         "metrics": [dict(x.held_out, metric="torque error RMS")],
                          "delta_bic": x.delta_bic, "correlations": []})
     for x in res.rejected:
         rejected.append({"effect": x.effect, "form": "torque balance", "reason": x.reason, "delta_bic": x.delta_bic,
