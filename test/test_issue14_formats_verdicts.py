@@ -166,3 +166,24 @@ def test_verdict_kinds():
     assert v.kind == NOT_DECIDABLE and "suspected" in v.text() and "a" in v.text()
     with pytest.raises(ValueError, match="Verdict.kind"):
         type(v)("maybe")
+
+
+def test_cli_takes_joint_with_map(tmp_path, capsys):
+    """``--joint`` and ``--map`` together (they were exclusive): the profile reads the joint, the map fixes one
+    column; the JSON says which column became the torque channel."""
+    sig = pd_run(NOMINAL, duration=4.0)
+    cols = {"time": sig.time}
+    for j in (1, 2):
+        cols[f"Position{j}"] = sig.channels["position"] / 9.0
+        cols[f"Velocity{j}"] = sig.channels["velocity"] / 9.0
+        cols[f"Cur{j}"] = sig.channels["current"]
+        cols[f"Torque{j}"] = 0.0 * sig.time + 0.01 * j
+    csv = tmp_path / "arm.csv"
+    write_csv(csv, cols)
+    params_file = tmp_path / "p.yaml"
+    dump_yaml(NOMINAL, params_file)
+    out, doc, md, md_verdict = _outputs(tmp_path, capsys, csv, params_file,
+                                        extra=("--joint", "joint2", "--map", "torque=Torque{j}"))
+    assert out.splitlines()[0] == doc["verdict"] == md_verdict
+    assert "torque" in doc["channels"]
+    assert any("--map over the input profile: torque=Torque2" in n for n in doc["notes"])

@@ -787,7 +787,9 @@ def clean(raw: Signals, limits: dict | None = None, params=None) -> Signals:
                           f"{name}: stuck at one value for {len(long)} run(s) of >= {need} samples ({total} samples; "
                           f"longest {int(lens[L])} samples = {_g(t[fin_idx[ends[L] - 1]] - t[fin_idx[starts[L]]])} s "
                           f"at {_g(fin[starts[L]])} {CANONICAL[name][0]})", "none (flagged)")
-        if name != "position":     # (a channel held at a limit most of the time has median |step| 0: checked too)
+        # a current or torque held at a limit most of the time has median |step| 0: checked too (a supply voltage
+        # resting on its set-point is not clipping)
+        if name != "position" and (np.median(np.abs(d)) > 0 or name in CURRENTS + TORQUES):
             big = float(np.max(np.abs(fin)))
             uniq, counts = np.unique(fin, return_counts=True)
             typical = float(np.median(counts))

@@ -32,6 +32,11 @@ def not_checkable(s: Search) -> DiagnosisReport:
                            aliases=[], verdict=rec.text(), verdict_record=rec, notes=s.ctx.notes)
 
 
+def _data_notes(signals) -> list[str]:
+    """What loading and cleaning noted about the recording (profile notes, --map over a profile, clocks...)."""
+    return [f"data: {n}" for n in ((getattr(signals, "meta", None) or {}).get("notes") or [])]
+
+
 def _strip(r):
     if not r:
         return r
@@ -194,7 +199,8 @@ def run(signals, params, s: Search, j: Judgement, m: Model, options, say: Say, t
         data_issues=s.data_issues, not_checkable=not_checkable,
         aliases=_aliases(sel, lib), verdict=verdict, verdict_record=verdict_rec,
         residual_structure=[x.to_dict() for x in structures],
-        notes=ctx.notes + m.notes + ([base["message"]] if base else []), compare=compare, locate=s.located,
+        notes=_data_notes(signals) + ctx.notes + m.notes + ([base["message"]] if base else []), compare=compare,
+        locate=s.located,
         rounds=sel.rounds, correlations=j.final.correlations, not_simulated=m.not_simulated, timing=timing,
         updated_params=m.params, nominal_params=params,
         setup={"rate_hz": ctx.fs, "cutoff_hz": ctx.dec.fc, "decimation": ctx.dec.q, "samples": int(len(ctx.t)),
@@ -260,7 +266,7 @@ def torque_balance(signals, params, res, options, say: Say, t_start: float) -> D
     return DiagnosisReport(
         channels=sorted(c for c, v in signals.channels.items() if np.isfinite(v).any()), findings=findings,
         rejected=rejected, windows=[], data_issues=issues, not_checkable=list(res.not_checkable), aliases=[],
-        verdict=verdict, verdict_record=rec, notes=list(res.notes), compare=compare,
+        verdict=verdict, verdict_record=rec, notes=_data_notes(signals) + list(res.notes), compare=compare,
         updated_params=tb_mod.updated_params(params, res), nominal_params=params, timing=timing,
         method="torque balance (no motor current)",
         setup={"rate_hz": rate, "samples": int(len(signals.time)), "holdout": f"{options.holdout:g} of the samples "
