@@ -101,7 +101,7 @@ def ak80_angle(data: Path, out: Path) -> dict:
             "held_out": "; ".join(heldout),
             "not_checked": "direction-dependent torque: all trials back-drive in one direction (Coulomb = "
                            "offset = K_t error here); voltage, temperature absent",
-            "report": d, "static_ratio": ratio_static}
+            "verdict": d["verdict"], "report": d, "static_ratio": ratio_static}
 
 
 # -- AK80-9 MIT torque log with motion both ways: direction-dependent torque -----------------------
@@ -137,7 +137,7 @@ def ak80_direction(data: Path, out: Path) -> dict:
             "parameters": "; ".join(params_txt) or "—", "frame_factor": ff,
             "held_out": "; ".join(heldout) or "—",
             "not_checked": "; ".join(f"{x['effect']}: {x['reason']}" for x in d["not_checkable"]) or "—",
-            "report": d}
+            "verdict": d["verdict"], "report": d}
 
 
 # -- AK80-9 servo efficiency runs: steady-state fits + voltage saturation --------------------------
@@ -290,11 +290,14 @@ def interpretation(rows: list[dict]) -> list[str]:
     if r:
         L += ["**AK80-9 MIT torque log (trial 8, motion both ways).** Direction-dependent friction is tested "
               "here instead, where the output moves in both directions: Coulomb and asymmetric friction are "
-              "*not* accepted (ΔBIC below the gate), so the tool says nothing about them rather than guess. "
+              "*not* accepted (they fail the ΔBIC or the held-out gate), so the tool says nothing about them rather than guess. "
               "It does accept a torque-constant error whose ratio to the preset (" + r["frame_factor"] + ") "
               "matches no frame factor and is 1.4× the locked-rotor Futek slope (0.0877 N·m/A motor side): "
               "unexplained, probably the rig (Futek also carries the antagonist's inertial torque while "
-              "the output accelerates, and the current clips at ±12.97 A). Not trusted as a K_t estimate.", ""]
+              "the output accelerates, and the current clips at ±12.97 A in 8.7 % of the samples, which now leave "
+              "the equations). Not trusted as a K_t estimate. The finding is not checkable in simulation (the "
+              "antagonist imposes the motion) and the verdict says so, with the base model's replay error as a "
+              "caveat.", ""]
     r = by.get("ak80-9/servo_efficiency")
     if r:
         rep = r["report"]
@@ -324,6 +327,12 @@ def interpretation(rows: list[dict]) -> list[str]:
               "aliased without a torque reading at the rotor. Friction: a constant drag τ_c ≈ 0.013 N·m "
               "(one direction only, so it is also a sensor offset) plus a small viscous term. Held-out "
               "torque RMS improves about 5×.", ""]
+    r = by.get("benkatz-dyno/friction_test")
+    if r:
+        L += ["**MIT (Katz) dyno friction test.** Torque and speed, no motor current: the torque-balance route, "
+              "with the same report schema and verdict as the full route. The balance explains none of the "
+              "torque (the motor under test was driven and its current is not logged), so the verdict is "
+              "\"not decidable\" with that reason instead of a list of rejected terms.", ""]
     L += ["## Not demonstrated", "",
           "* MIT (Katz) dyno logs: no phase current is logged (bus current only), so K_t vs Kv needs the "
           "efficiency-map route (not built); friction_test's torque semantics are inferred, not documented.",
@@ -331,10 +340,33 @@ def interpretation(rows: list[dict]) -> list[str]:
     return L
 
 
+# -- MIT (Katz) dyno friction test: torque and speed, no motor current -> the torque-balance route ------
+
+def katz_friction(data: Path, out: Path) -> dict:
+    name = "benkatz-dyno/friction_test"
+    s = realdata.load_dataset(name, data)
+    prm = P.ActuatorParams().replace(**{"gear.gear_ratio": 1.0})      # direct drive; the motor is not documented
+    rep = diagnose(s, prm, options=DiagnoseOptions())
+    d = rep.to_dict()
+    tag = "katz_friction_test"
+    rep.write_json(out / f"{tag}.json")
+    rep.write_markdown(out / tag)
+    tb = d["compare"]["torque_balance"]
+    o = tb.get("order_spectrum") or {}
+    return {"dataset": name, "demo": "torque balance (torque + speed, no motor current)",
+            "found": ", ".join(f["effect"] for f in d["findings"]) or "nothing",
+            "parameters": "—", "frame_factor": "—",
+            "held_out": f"torque RMS {tb['held_out']['nominal']:.3g} → {tb['held_out']['after']:.3g} N·m",
+            "not_checked": (f"angle-order peak {o['order']:.3g} ± {o['order_sd']:.2g}/rev, {o['amplitude']:.3g} N·m, "
+                            f"{o['peak_over_median']:.1f}× the median (not angle-locked)" if o else "—"),
+            "verdict": d["verdict"], "report": d}
+
+
 DEMOS = [("ak80-9/torque_vs_angle/synchronized_trial_4", ak80_angle),
          ("ak80-9/sysid_final/trial8", ak80_direction),
          ("ak80-9/servo_efficiency", ak80_servo),
-         ("odrive-d5065/odrive_data", d5065)]
+         ("odrive-d5065/odrive_data", d5065),
+         ("benkatz-dyno/friction_test", katz_friction)]
 
 
 def main(argv=None) -> int:
@@ -364,8 +396,11 @@ def main(argv=None) -> int:
         row["seconds"] = time.time() - t0
         rows.append(row)
         print(f"[{row['seconds']:.1f} s] {name}", file=sys.stderr)
-    cols = ["dataset", "found", "parameters", "frame_factor", "held_out", "not_checked"]
-    head = "| dataset | found (plain words) | fitted parameters ± 1σ | frame factor | held-out before → after | not checked (why) |"
+    cols = ["dataset", "found", "parameters", "frame_factor", "held_out", "not_checked", "verdict"]
+    for r in rows:
+        r.setdefault("verdict", "— (steady-state fit, not the diagnose pipeline)")
+    head = ("| dataset | found (plain words) | fitted parameters ± 1σ | frame factor | held-out before → after | "
+            "not checked (why) | diagnose verdict |")
     table = [head, "|" + "---|" * len(cols)]
     for r in rows:
         table.append("| " + " | ".join(str(r[k]).replace("|", "/") for k in cols) + " |")

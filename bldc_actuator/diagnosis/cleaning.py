@@ -490,10 +490,11 @@ def _unit_suspects_torque(ctx: _Ctx, t, ch) -> None:
                       verdict + "; values kept as recorded", f"none; fix with --map {name}=COL*0.001")
 
 
-def _position_velocity(ctx: _Ctx, t, ch, segments) -> None:
+def _pv_ratio(ctx: _Ctx | None, t, ch, segments) -> tuple[float, str, int] | None:
+    """Ratio of position increments to integrated velocity and how it was obtained (None: cannot tell)."""
     x, v = ch.get("position"), ch.get("velocity")
     if x is None or v is None:
-        return
+        return None
     A, B = [], []
     for a, b in segments:
         n = b - a
@@ -509,25 +510,54 @@ def _position_velocity(ctx: _Ctx, t, ch, segments) -> None:
             A.append(xs[-1] - xs[0])
             B.append(float(np.sum(0.5 * (vs[1:] + vs[:-1]) * np.diff(ts))))
     if len(A) < 5:
-        return
+        return None
     A, B = np.asarray(A), np.asarray(B)
     moved = float(np.sum(np.abs(A)))
-    if moved < 1.0 or np.sum(np.abs(B)) < 1e-9:
-        return
+    if moved < 1.0 or np.sum(np.abs(B)) < 1e-12:
+        return None
     if abs(B.sum()) > 0.5 * np.sum(np.abs(B)):
-        r = float(A.sum() / B.sum())
-        how = "net displacement / integrated velocity"
-    else:
-        rr = _ratio(A, B)
-        if rr is None or abs(rr[1]) < 0.7:
-            if rr is not None:
-                ctx.issue("unit_suspect", "position", len(A), None,
-                          f"position increments and integrated velocity disagree (correlation {_g(rr[1])} over "
-                          f"{len(A)} windows): different sides of a gear, a different time base, or a bad sensor",
-                          "none")
-            return
-        r = rr[0]
-        how = "least squares over windows"
+        return float(A.sum() / B.sum()), "net displacement / integrated velocity", len(A)
+    rr = _ratio(A, B)
+    if rr is None or abs(rr[1]) < 0.7:
+        if rr is not None and ctx is not None:
+            ctx.issue("unit_suspect", "position", len(A), None,
+                      f"position increments and integrated velocity disagree (correlation {_g(rr[1])} over "
+                      f"{len(A)} windows): different sides of a gear, a different time base, or a bad sensor",
+                      "none")
+        return None
+    return rr[0], "least squares over windows", len(A)
+
+
+#: clocks that are not seconds: (seconds per tick, name)
+CLOCK_UNITS = ((1e-3, "milliseconds"), (1e-6, "microseconds"), (1e-9, "nanoseconds"))
+
+
+def _time_unit(ctx: _Ctx, t, ch, segments) -> float:
+    """A time column counting ms / us / ns, recognised from position increments = that factor x the velocity
+    integrated over the column's values (the velocity being per second). Returns the factor to apply to t
+    (1.0: seconds)."""
+    got = _pv_ratio(None, t, ch, segments)
+    if got is None:
+        return 1.0
+    r, how, _ = got
+    for f, name in CLOCK_UNITS:
+        if abs(abs(r) / f - 1) < 0.03:
+            dt = float(np.median(np.diff(t))) if len(t) > 1 else float("nan")
+            ctx.issue("unit_suspect", "time", len(t), float(t[0]) * f,
+                      f"time: position increments are {_g(r)} x the velocity integrated over the time column "
+                      f"({how}): the clock counts {name}, not seconds (read as seconds the rate would be "
+                      f"{_g(1 / dt) if dt > 0 else 'nan'} Hz; it is {_g(1 / (dt * f)) if dt > 0 else 'nan'} Hz)",
+                      f"time rescaled to seconds (x{f:g}); to override, map the time column yourself, e.g. "
+                      f"--map time=COL*{f:g}")
+            return f
+    return 1.0
+
+
+def _position_velocity(ctx: _Ctx, t, ch, segments) -> None:
+    got = _pv_ratio(ctx, t, ch, segments)
+    if got is None:
+        return
+    r, how, nwin = got
     ctx.notes.append(f"position/velocity consistency: ratio {_g(r)} ({how})")
     if abs(r - 1) < 0.1:
         return
@@ -536,13 +566,13 @@ def _position_velocity(ctx: _Ctx, t, ch, segments) -> None:
         if abs(r / f - 1) < 0.07 and (best is None or abs(r / f - 1) < abs(r / best[0] - 1)):
             best = (f, txt, fix)
     if best is not None and best[0] == -1.0:
-        ctx.issue("sign_convention", "velocity", len(A), None,
+        ctx.issue("sign_convention", "velocity", nwin, None,
                   f"velocity: position increments are {_g(r)} x the integrated velocity; {best[1]}",
                   f"none; {best[2]}")
         return
     detail = (f"position increments are {_g(r)} x the integrated velocity ({how}); "
               + (best[1] if best else "no known unit or gear factor explains it"))
-    ctx.issue("unit_suspect", "position", len(A), None, detail, f"none; {best[2]}" if best else "none")
+    ctx.issue("unit_suspect", "position", nwin, None, detail, f"none; {best[2]}" if best else "none")
 
 
 def _signs(ctx: _Ctx, t, ch) -> None:
@@ -617,6 +647,51 @@ def _limits_and_spikes(ctx: _Ctx, t, ch, segments, names) -> None:
 
 
 
+def _supply_voltage(ctx: _Ctx, t, ch) -> None:
+    """A supply (bus) voltage far below anything that drives a motor: a mis-mapped column or a per-unit value.
+    Masked (it would set voltage limits) and reported."""
+    x = ch.get("bus_voltage")
+    if x is None or "bus_voltage" in ctx.bounds_override or not np.isfinite(x).any():
+        return
+    med = float(np.nanmedian(x))
+    p = ctx.params
+    ref, why = (0.2 * p.drive.bus_voltage, f"0.2 x drive.bus_voltage {_g(p.drive.bus_voltage)} V") if p is not None \
+        else (3.0, "3 V (no parameters given)")
+    if med >= ref:
+        return
+    fin = np.isfinite(x)
+    ctx.issue("unit_suspect", "bus_voltage", int(fin.sum()), float(t[np.flatnonzero(fin)[0]]),
+              f"bus_voltage: median {_g(med)} V is implausible for a supply voltage (below {why}): a mis-mapped "
+              f"column, a per-unit / duty value or a different unit", "masked (NaN), excluded from fits; map the "
+              "supply voltage column (--map bus_voltage=COL) or fix the input profile")
+    ctx.exempt.add("bus_voltage")
+    _mask(ctx, ch, "bus_voltage", fin, "implausible supply voltage")
+
+
+def _current_vs_command(ctx: _Ctx, t, ch) -> None:
+    """The measured current as a fixed multiple of its command that is not 1: a frame factor (amplitude- vs
+    power-invariant, peak vs RMS) between what the drive reports and what it was sent?"""
+    i, c = ch.get("current"), ch.get("current_command")
+    if i is None or c is None:
+        return
+    r = _ratio(i, c)
+    if r is None or r[1] < 0.9 or abs(r[0] - 1) < 0.03:
+        return
+    from .. import frames
+
+    best = None
+    for name, (f, _) in frames.torque_constant_frame_factors().items():
+        if abs(r[0] / f - 1) < 0.02 and (best is None or abs(r[0] / f - 1) < abs(r[0] / best[0] - 1)):
+            best = (f, name)
+    n = int(np.sum(np.isfinite(i) & np.isfinite(c)))
+    ctx.issue("unit_suspect", "current", n, None,
+              f"current: the measured current is {_g(r[0])} x its command (correlation {_g(r[1])}); "
+              + (f"that is the frame factor {best[1]} = {_g(best[0])}: the drive reports the current in another "
+                 f"frame than it is commanded in" if best else "no frame factor explains it"),
+              "none; " + (f"check which frame each column is in (--map current=COL*{_g(1 / r[0])} to read it in "
+                          "the command's frame)" if best else "check the current scaling"))
+
+
 # =============================================================================================== clean
 
 def clean(raw: Signals, limits: dict | None = None, params=None) -> Signals:
@@ -637,6 +712,15 @@ def clean(raw: Signals, limits: dict | None = None, params=None) -> Signals:
     t = raw.time[idx].astype(float)
     ch = {k: np.array(v[idx], dtype=float) for k, v in raw.channels.items()}
     segments, sampling = _segments(ctx, t, forced)
+    f_clock = _time_unit(ctx, t, ch, segments)
+    if f_clock != 1.0:      # a ms / us clock: the gaps found above were measured in its ticks
+        ctx.issues = [i for i in ctx.issues if not (i.kind == "gap" and i.channel == "time")]
+        ctx.notes = [n for n in ctx.notes if not n.startswith("irregular sampling")]
+        t = t * f_clock
+        segments, sampling = _segments(ctx, t, forced)
+        raw_meta_time_scale = f_clock
+    else:
+        raw_meta_time_scale = 1.0
 
     # NaN / inf / empty channels
     for name in list(ch):
@@ -667,7 +751,11 @@ def clean(raw: Signals, limits: dict | None = None, params=None) -> Signals:
     _signs(ctx, t, ch)
     _limits_and_spikes(ctx, t, ch, segments, [c for c in ch if c in TORQUES])
 
+    _supply_voltage(ctx, t, ch)
+    _current_vs_command(ctx, t, ch)
+
     # constant / stuck / clipped
+    clipped: dict[str, dict] = {}
     rate = 1.0 / sampling["dt_median"] if sampling.get("dt_median") else float("nan")
     for name in list(ch):
         x = ch[name]
@@ -699,6 +787,9 @@ def clean(raw: Signals, limits: dict | None = None, params=None) -> Signals:
                           f"{name}: stuck at one value for {len(long)} run(s) of >= {need} samples ({total} samples; "
                           f"longest {int(lens[L])} samples = {_g(t[fin_idx[ends[L] - 1]] - t[fin_idx[starts[L]]])} s "
                           f"at {_g(fin[starts[L]])} {CANONICAL[name][0]})", "none (flagged)")
+        # a current or torque held at a limit most of the time has median |step| 0: checked too (a supply voltage
+        # resting on its set-point is not clipping)
+        if name != "position" and (np.median(np.abs(d)) > 0 or name in CURRENTS + TORQUES):
             big = float(np.max(np.abs(fin)))
             uniq, counts = np.unique(fin, return_counts=True)
             typical = float(np.median(counts))
@@ -711,6 +802,15 @@ def clean(raw: Signals, limits: dict | None = None, params=None) -> Signals:
                     ctx.issue("clipped", name, cnt, float(t[fin_idx[np.flatnonzero(at)[0]]]),
                               f"{name}: {cnt} samples ({_g(100 * cnt / len(fin))} %) sit exactly at the {side} "
                               f"{_g(val)} {CANONICAL[name][0]}: saturated sensor or limiter?", "none (flagged)")
+                    rec = clipped.setdefault(name, {"levels": [], "count": 0, "finite": int(len(fin))})
+                    rec["levels"].append(float(val))
+                    rec["count"] += cnt
+    for name, rec in clipped.items():
+        rec["fraction"] = rec["count"] / max(rec["finite"], 1)
+        if name == "current":
+            ctx.notes.append(f"current sits at {', '.join(_g(v) for v in rec['levels'])} A in "
+                             f"{_g(100 * rec['fraction'])} % of the samples (a drive's current limit): those samples "
+                             f"are left out of current-proportional fits")
 
     # accounting and meta
     meta = dict(raw.meta)
@@ -729,6 +829,9 @@ def clean(raw: Signals, limits: dict | None = None, params=None) -> Signals:
     meta["rate_hz"] = sampling.get("rate_hz", float("nan"))
     meta["notes"] = ctx.notes
     meta["cleaned"] = True
+    if raw_meta_time_scale != 1.0:
+        meta["time_scale"] = raw_meta_time_scale
+    meta["clipped"] = clipped
     meta["unit_suspects"] = sorted(ctx.exempt)
     _profile_fix_hints(ctx.issues, raw.meta)
     return Signals(t, ch, raw.source, ctx.issues, segments, meta)

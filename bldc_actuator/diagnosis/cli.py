@@ -132,10 +132,6 @@ def run(args) -> int:
         return _fail(f"--tolerance: expected a fraction 0 <= f < 1, got {args.tolerance!r}")
     if not (args.max_uncertainty > 0.0):
         return _fail(f"--max-uncertainty: expected a fraction > 0, got {args.max_uncertainty!r}")
-    from . import torque_balance
-
-    if torque_balance.applicable(signals):
-        return _run_torque_balance(signals, params, args)
     options = DiagnoseOptions(effects=effects, holdout=args.holdout, holdout_signals=holdout_signals,
                               cutoff_hz=args.cutoff, window_s=args.window, progress=progress,
                               tolerance=args.tolerance, max_relative_uncertainty=args.max_uncertainty,
@@ -154,50 +150,25 @@ def run(args) -> int:
     return 0
 
 
-def _run_torque_balance(signals, params, args) -> int:
-    """Torque and motion but no current: cogging and friction from the torque balance."""
-    import json
-
-    from . import torque_balance
-
-    res = torque_balance.diagnose(signals, params, holdout=args.holdout)
-    doc = {"recording": signals.source, "profile": signals.meta.get("profile"), **res.to_dict(),
-           "data_issues": signals.to_json_issues()}
-    print(f"torque balance (no motor current logged): {len(res.findings)} finding(s); R^2 {res.r2:.3f}; "
-          f"held-out torque RMS {_fmt(res.held_out.get('nominal'))} (given parameters) -> "
-          f"{_fmt(res.held_out.get('after'))} N*m")
-    for f in res.findings:
-        pars = ", ".join(f"{k}={_fmt(v)}±{_fmt(f.uncertainty.get(k))}" for k, v in f.parameters.items())
-        print(f"  {f.effect}: {pars}; held-out torque RMS {_fmt(f.held_out['before'])} -> {_fmt(f.held_out['after'])} N*m")
-    for f in res.rejected:
-        print(f"  not accepted: {f.effect}: {f.reason}")
-    for x in res.not_checkable:
-        print(f"  not checkable: {x['effect']}: {x['reason']}")
-    for n in res.notes:
-        print(f"  note: {n}")
-    if args.json:
-        Path(args.json).write_text(json.dumps(doc, indent=1, default=float))
-        print(f"  wrote json: {args.json}")
-    if args.updated_params:
-        from ..params import dump_yaml
-
-        dump_yaml(torque_balance.updated_params(params, res), args.updated_params)
-        print(f"  wrote updated params: {args.updated_params}")
-    return 0
-
-
 def _print_summary(report, args) -> None:
     print(report.verdict)
+    if report.method != "equation error + simulation":
+        print(f"  route: {report.method}")
+    for u in report.verdict_record.undecidable:
+        if u.remedy:
+            print(f"  {'not decidable' if report.verdict_kind == 'not decidable' else 'caveat'}: {u.code}: "
+                  f"what to do: {u.remedy}")
     for f in report.findings:
         pars = ", ".join(f"{k}={_fmt(v)}±{_fmt(f['uncertainty'].get(k))}" for k, v in f["parameters"].items()
                          if not isinstance(v, str))
-        tag = "" if f.get("simulated", True) else " [not yet simulated]"
+        tag = ("" if f.get("simulated", True) else " [not yet simulated]") + \
+            (" [not checkable in simulation]" if f.get("not_checkable_in_simulation") else "")
         ho = f.get("held_out") or {}
         line = f"  {f['effect']}{tag}: {pars}"
         if f.get("frame_factor"):
             line += f"; frame factor {f['frame_factor']}"
         if ho:
-            line += f"; held-out {ho['metric']}: {_fmt(ho['before'])} -> {_fmt(ho['after'])} {ho.get('unit', '')}"
+            line += f"; held-out {ho.get('metric', '')}: {_fmt(ho['before'])} -> {_fmt(ho['after'])} {ho.get('unit', '')}"
         sim = f.get("simulation")
         if sim and sim.get("channel"):
             unit = {"velocity": "rad/s", "current": "A", "voltage": "V", "temperature": "K"}[sim["channel"]]
@@ -206,8 +177,17 @@ def _print_summary(report, args) -> None:
         print(line)
     for a in report.aliases:
         print(f"  alias: {a['message']}; experiment: {a['experiment']}")
+    for x in report.rejected:
+        if x.get("form") == "torque balance":
+            print(f"  not accepted: {x['effect']}: {x['reason']}")
     for x in report.not_checkable:
         print(f"  not checkable: {x['effect']}: {x['reason']}")
+    shown = [d for d in report.data_issues if d.get("kind") in ("unit_suspect", "clipped", "sign_convention",
+                                                                  "missing_channel")]
+    if report.data_issues:
+        print(f"  data issues: {len(report.data_issues)}" + (" (all in the report)" if report.data_issues else ""))
+        for d in shown[:8]:
+            print(f"    [{d.get('kind')}] {d.get('detail')} -> {d.get('action')}")
     for name, path in (("json", args.json), ("report", args.report and str(Path(args.report) / "report.md")),
                        ("updated params", args.updated_params)):
         if path:

@@ -420,6 +420,18 @@ def prepare(parts: list[tuple[Any, bool]], params: ActuatorParams, *, fc: float 
                          f"{4 * fs / fc_used:.0f} samples at {fs:.4g} Hz)")
     valid = {k: np.isfinite(v) for k, v in raw_in.items()}
     raw = {k: _fill(v, valid[k], segments) for k, v in raw_in.items()}
+    # a current held at the drive's limit (cleaning's "clipped" levels): current-proportional terms are not
+    # identifiable there; those samples stay in the signals but leave the equations
+    clipped = np.zeros(len(t), bool)
+    for (sig, _), a in zip([p for p in parts if len(np.asarray(p[0].time))], starts):
+        levels = ((getattr(sig, "meta", {}) or {}).get("clipped") or {}).get("current", {}).get("levels", [])
+        if levels and "current" in raw_in:
+            seg = raw_in["current"][a:a + len(sig.time)]
+            clipped[a:a + len(sig.time)] = np.isin(seg, np.asarray(levels, float))
+    if clipped.any() and "current" in valid:
+        valid["current"] = valid["current"] & ~clipped
+        notes.append(f"current at the drive's limit in {100 * clipped.mean():.1f} % of the samples: left out of "
+                     "the model equations (current-proportional terms are not identifiable there)")
     ctx = Context(params=params, t=t, segments=segments, fs=fs, dec=dec, have=set(raw), raw=raw, valid=valid,
                   notes=notes, steady=steady, part_starts=tuple(starts))
     if len(parts) > 1 and any(h for _, h in parts):

@@ -346,8 +346,12 @@ def _unit_factor(unit: str, pole_pairs, where: str) -> tuple[float, float]:
     return UNITS[u]
 
 
-def read(path: str | Path, profile: InputProfile, params=None, joint: str | None = None) -> Signals:
-    """Read ``path`` as ``profile`` says; the result is raw (run :func:`.cleaning.clean` next)."""
+def read(path: str | Path, profile: InputProfile, params=None, joint: str | None = None,
+         overrides: Mapping | None = None) -> Signals:
+    """Read ``path`` as ``profile`` says; the result is raw (run :func:`.cleaning.clean` next). ``overrides``
+    (``--map``): channels read from these expressions instead of the profile's (canonical units and side, as
+    every ``--map``; ``{j}`` in a column name is the chosen joint's id), the profile's other channels kept."""
+    overrides = overrides if overrides is not None and overrides.columns else None
     path = Path(path)
     where = f"{path}: profile {profile.name}"
     if profile.format == "mcap":
@@ -388,6 +392,8 @@ def read(path: str | Path, profile: InputProfile, params=None, joint: str | None
 
     mapping, sides = Mapping(), {}
     for ch, spec in columns.items():
+        if overrides is not None and ch in overrides.columns:
+            continue
         alts = _alternatives(spec)
         hit = next(((e, s) for e, s in alts if _column_exists(e, header, headerless, width)), None)
         if hit is None:
@@ -406,7 +412,19 @@ def read(path: str | Path, profile: InputProfile, params=None, joint: str | None
         if hit is not None:
             aux[name] = _normalise_negative_index(hit, width)
     time_spec = profile.time or {}
-    if "column" in time_spec:
+    if overrides is not None:
+        jid_ = jid if profile.joints else ""
+        for ch, src in overrides.columns.items():
+            src = src.replace("{j}", jid_)
+            if not _column_exists(src, header, headerless, width) and not src.startswith("#"):
+                raise LoadError(f"{where}: --map {ch}={src}: no such column (columns: {', '.join(header_list)})")
+            mapping.columns[ch] = _normalise_negative_index(src, width)
+            mapping.scale[ch] = overrides.scale.get(ch, 1.0)
+            mapping.offset[ch] = overrides.offset.get(ch, 0.0)
+            sides[ch] = "motor"
+        if "time" in overrides.columns:
+            time_spec = {k: v for k, v in time_spec.items() if k != "column"}
+    if "column" in time_spec and (overrides is None or "time" not in overrides.columns):
         alts = _alternatives(time_spec["column"])
         hit = next((e for e, _ in alts if _column_exists(e, header, headerless, width)), None)
         if hit is None:
@@ -429,8 +447,11 @@ def read(path: str | Path, profile: InputProfile, params=None, joint: str | None
         t0 = float(sig.time[0])
         sig.time = sig.time - t0
         sig.meta["time_offset_s"] = t0
-    _units(sig, profile, params, where)
+    _units(sig, profile, params, where, skip=set(overrides.columns) if overrides is not None else set())
     _sides(sig, profile, params, sides, where)
+    if overrides is not None:
+        sig.meta["notes"].append("--map over the input profile: " + ", ".join(
+            f"{ch}={sig.meta['mapping'].get(ch, src)}" for ch, src in overrides.columns.items()))
     return _finish(sig, path, profile, params, joint, where)
 
 
@@ -441,10 +462,12 @@ def _normalise_negative_index(expr: str, width: int) -> str:
     return expr
 
 
-def _units(sig: Signals, profile: InputProfile, params, where: str) -> None:
+def _units(sig: Signals, profile: InputProfile, params, where: str, skip: set = frozenset()) -> None:
     pp = profile.pole_pairs or (params.motor.pole_pairs if params is not None else None)
     file_units = sig.meta.get("units") or {}
     for ch, unit in profile.units.items():
+        if ch in skip:
+            continue
         if ch == "time":
             scale, off = _unit_factor(unit, pp, f"{where}: units.time")
             sig.time = sig.time * scale + off

@@ -92,8 +92,17 @@ def load(path: str | Path, *, mapping: Mapping | None = None, params=None, joint
     if mapping is not None and mapping.columns:
         if suffix == ".mcap":
             return load_mcap(path, mapping=mapping, params=params, joint=joint)
-        if joint is not None:
-            raise LoadError(f"{path}: --joint with --map: map that joint's columns instead")
+        if joint is not None or profile is not None:
+            # --map over a profile (--profile, or the one --joint needs): the profile reads the joint, the map
+            # replaces or adds the channels it names
+            prof = resolve_profile(path, profile)
+            if prof is None:
+                raise LoadError(f"{path}: --joint applies to files of several actuators (no input profile "
+                                f"recognises this one as such; give --profile)")
+            sig = input_profiles.read(path, prof, params=params, joint=joint, overrides=mapping)
+            sig.meta["profile_how"] = ("given (--profile)" if profile is not None else
+                                       "auto-detected from the header") + ", with --map over it"
+            return sig
         return load_csv(path, mapping=mapping, params=params)
     prof = resolve_profile(path, profile)
     if prof is not None:

@@ -14,7 +14,13 @@ recording:
 * :mod:`.stages.refit` — output-error refit (multiple shooting) and the updated parameter file.
 * :mod:`.stages.report` — findings, before/after, the :class:`.report.DiagnosisReport`.
 
-One progress line per step on stderr when ``options.progress``.
+The route is chosen from the channels (:func:`route`): a log with torque and motion but no motor current goes
+to the torque balance (:mod:`.torque_balance`), reported by :func:`.stages.report.torque_balance` in the same
+:class:`DiagnosisReport` schema. The CLI and ``fleet`` both call :func:`diagnose`. Every report ends in one of
+three verdicts (:mod:`.results`: found / nothing missing / not decidable with the reasons of
+:mod:`.decidability`, including a structured residual outside the catalogue, :mod:`.residual_structure`).
+
+One progress line per step on stderr when ``options.progress``, numbered alike on both routes (``k/6``).
 
 Usage::
 
@@ -74,11 +80,40 @@ def _progress(options: DiagnoseOptions) -> Callable[[str], None]:
     return lambda msg: None
 
 
+FULL = "equation error + simulation"
+TORQUE_BALANCE = "torque balance"
+
+
+def route(signals) -> str:
+    """Which route diagnoses ``signals``: :data:`TORQUE_BALANCE` when torque and motion are logged but no
+    current (:func:`.torque_balance.applicable`), else :data:`FULL`."""
+    from . import torque_balance
+
+    return TORQUE_BALANCE if torque_balance.applicable(signals) else FULL
+
+
 def diagnose(signals, params: ActuatorParams, *, options: DiagnoseOptions | None = None) -> DiagnosisReport:
     """Diagnose ``signals`` (a :class:`~bldc_actuator.diagnosis.signals.Signals`, cleaned) against the
-    nominal ``params``. See the module docstring for the stages and :class:`DiagnosisReport` for the result."""
+    nominal ``params``, on the route the recording allows (:func:`route`). See the module docstring for the
+    stages and :class:`DiagnosisReport` for the result (one schema on both routes)."""
+    options = options or DiagnoseOptions()
     with SingleThreadedBLAS():
-        return _diagnose(signals, params, options or DiagnoseOptions())
+        if route(signals) == TORQUE_BALANCE:
+            return _torque_balance(signals, params, options)
+        return _diagnose(signals, params, options)
+
+
+def _torque_balance(signals, params: ActuatorParams, options: DiagnoseOptions) -> DiagnosisReport:
+    from . import torque_balance
+
+    say = _progress(options)
+    t_start = time.perf_counter()
+    say(f"1/6 prepare: torque and motion logged, no motor current: the torque-balance route "
+        f"({len(signals.time)} samples)")
+    res = torque_balance.diagnose(signals, params, holdout=options.holdout)
+    say(f"4/6 attribute: accepted {[f.effect for f in res.findings] or 'nothing'}; "
+        f"{len(res.not_checkable)} not checkable")
+    return report.torque_balance(signals, params, res, options, say, t_start)
 
 
 def _diagnose(signals, params: ActuatorParams, options: DiagnoseOptions) -> DiagnosisReport:

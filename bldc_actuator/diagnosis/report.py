@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from ..params import ActuatorParams, dump_yaml
+from .results import NOT_DECIDABLE, NOTHING_MISSING, Verdict, decide
 
 
 def _clean(x):
@@ -65,11 +66,25 @@ class DiagnosisReport:
     setup: dict = field(default_factory=dict)
     updated_params: ActuatorParams | None = None
     nominal_params: ActuatorParams | None = None
+    verdict_record: Verdict | None = None     #: the verdict's kind and reasons (:mod:`.results`)
+    residual_structure: list = field(default_factory=list)   #: what is left after the findings, where it sits
+    method: str = "equation error + simulation"
     _internals: dict = field(default_factory=dict, repr=False)
+
+    def __post_init__(self):
+        if self.verdict_record is None:
+            self.verdict_record = decide([f["effect"] for f in self.findings], [])
+        if not self.verdict:
+            self.verdict = self.verdict_record.text()
 
     @property
     def nothing_missing(self) -> bool:
+        """No finding (the verdict's kind says whether that is "nothing missing" or "not decidable")."""
         return not self.findings
+
+    @property
+    def verdict_kind(self) -> str:
+        return self.verdict_record.kind
 
     @property
     def effects(self) -> list[str]:
@@ -91,11 +106,14 @@ class DiagnosisReport:
                                        "median": spec.get("median"), "method": spec.get("method")}
             L.pop("rolling_rms", None)
             loc[eq] = L
-        d = {"verdict": self.verdict, "nothing_missing": self.nothing_missing, "channels": self.channels,
+        d = {"verdict": self.verdict, "verdict_kind": self.verdict_kind,
+             "verdict_reasons": [u.to_dict() for u in self.verdict_record.undecidable],
+             "nothing_missing": self.nothing_missing, "method": self.method, "channels": self.channels,
              "findings": self.findings, "rejected": self.rejected, "windows": self.windows,
              "data_issues": self.data_issues, "not_checkable": self.not_checkable, "aliases": self.aliases,
              "not_simulated": self.not_simulated, "compare": self.compare, "locate": loc,
              "selection_rounds": self.rounds, "parameter_correlations": self.correlations,
+             "residual_structure": self.residual_structure,
              "setup": self.setup, "timing": self.timing, "notes": self.notes}
         return _clean(d)
 
@@ -148,14 +166,22 @@ def _markdown(r: DiagnosisReport, images: dict[str, str]) -> str:
     L = ["# Diagnosis report", "", f"**Verdict: {r.verdict}**", ""]
     s = r.setup
     if s:
+        filt = (f"parallel low-pass {_g(s.get('cutoff_hz'))} Hz, decimation x{s.get('decimation')} "
+                f"({s.get('decimated_samples')} samples for statistics); " if s.get("cutoff_hz") else "")
         L += [f"Recording `{s.get('source', '')}`: {s.get('samples')} samples at {_g(s.get('rate_hz'))} Hz; "
-              f"parallel low-pass {_g(s.get('cutoff_hz'))} Hz, decimation x{s.get('decimation')} "
-              f"({s.get('decimated_samples')} samples for statistics); held-out: {s.get('holdout')}.", "",
+              f"{filt}held-out: {s.get('holdout')}. Route: {r.method}.", "",
               f"Channels: {', '.join(r.channels)}.", ""]
+    if r.verdict_kind == NOT_DECIDABLE or r.verdict_record.undecidable:
+        L += ["## Not decidable" if r.verdict_kind == NOT_DECIDABLE else "## Caveats", ""]
+        for u in r.verdict_record.undecidable:
+            L.append(f"- {u.reason}" + (f". What to do: {u.remedy}" if u.remedy else ""))
+        L.append("")
     if r.findings:
         L += ["## What is missing", ""]
         for f in r.findings:
-            L += [f"### {f['effect']}" + ("" if f.get("simulated", True) else " (found; not yet simulated)"), "",
+            tag = ("" if f.get("simulated", True) else " (found; not yet simulated)") + \
+                (" (not checkable in simulation)" if f.get("not_checkable_in_simulation") else "")
+            L += [f"### {f['effect']}{tag}", "",
                   f"{f.get('description', '')}. Form: {f.get('form', '')}.", ""]
             L += ["| parameter | value | ± 1σ | unit | parameter-file field |", "|---|---|---|---|---|"]
             for k, v in f["parameters"].items():
@@ -172,10 +198,13 @@ def _markdown(r: DiagnosisReport, images: dict[str, str]) -> str:
                 L += ["", "Strongly correlated parameters: " + ", ".join(
                     f"{c['a']}~{c['b']} ({c['correlation']:+.2f})" for c in f["correlations"])]
             L.append("")
-    else:
+    elif r.verdict_kind == NOTHING_MISSING:
         L += ["## Nothing missing", "",
               "No candidate effect passed both gates (ΔBIC on decimated training data AND a significant "
               "improvement on held-out data).", ""]
+    large = [x for x in r.residual_structure if x.get("large")]
+    if large:
+        L += ["## Left unexplained (outside the catalogue)", ""] + [f"- {x['message']}" for x in large] + [""]
     if r.aliases:
         L += ["## Cannot tell apart with this data", ""]
         for a in r.aliases:
@@ -192,7 +221,18 @@ def _markdown(r: DiagnosisReport, images: dict[str, str]) -> str:
             L.append(f"- **{x['effect']}**: not checkable: {x['reason']}")
         L.append("")
     c = r.compare or {}
-    if c:
+    tb = c.get("torque_balance")
+    if tb:
+        L += ["## Torque balance", "", f"Angle: {tb.get('angle_source', '')}; R² of the balance {_g(tb.get('r2'))}.",
+              "", "| comparison | given parameters | updated | unit |", "|---|---|---|---|",
+              f"| torque error RMS, held-out | {_g(tb['held_out'].get('nominal'))} | {_g(tb['held_out'].get('after'))} "
+              f"| N*m |", ""]
+        if tb.get("order_spectrum"):
+            o = tb["order_spectrum"]
+            L += [f"Angle-order spectrum of the friction-only residual: peak at order {_g(o['order'])} ± "
+                  f"{_g(o['order_sd'])} per motor revolution, {_g(o['amplitude'])} N*m, {_g(o['peak_over_median'])} x "
+                  f"the median, over {_g(o['revolutions'])} revolution(s).", ""]
+    if c and c.get("equation_error") is not None:
         L += ["## Model vs recording", "", "| comparison | nominal | updated | unit |", "|---|---|---|---|"]
         for eq, m in (c.get("equation_error") or {}).items():
             L.append(f"| {eq} equation error RMS, held-out | {_g(m['nominal']['holdout_rms'])} | "

@@ -66,6 +66,7 @@ class TorqueBalanceResult:
     r2: float
     held_out: dict
     not_checkable: list[dict] = field(default_factory=list)
+    spectrum: dict | None = None      #: the angle-order peak: order ± sd, amplitude, x median, revolutions
 
     def to_dict(self) -> dict:
         def t(x: Term) -> dict:
@@ -75,7 +76,7 @@ class TorqueBalanceResult:
         return {"method": "torque balance (no motor current)", "angle_source": self.angle_source,
                 "r2": self.r2, "held_out": self.held_out, "findings": [t(x) for x in self.findings],
                 "rejected": [t(x) for x in self.rejected], "not_checkable": self.not_checkable,
-                "notes": self.notes}
+                "order_spectrum": self.spectrum, "notes": self.notes}
 
 
 # ----------------------------------------------------------------------------------------- signals
@@ -157,6 +158,7 @@ def _bic(rss: float, n: int, k: int) -> float:
 
 
 PEAK_OVER_MEDIAN = 5.0
+MIN_PERIODS = 3.0        #: an angle order must complete this many periods over the angle covered
 
 
 def _consistent(th, r, order, om, both_ways) -> tuple[bool, str]:
@@ -194,6 +196,43 @@ def order_spectrum(theta: np.ndarray, r: np.ndarray, max_order: int) -> np.ndarr
         coef = np.linalg.lstsq(X, r, rcond=None)[0]
         amps[k] = float(np.hypot(*coef))
     return amps
+
+
+def order_scan(theta: np.ndarray, r: np.ndarray, kmin: float, kmax: int, revs: float):
+    """(orders, amplitudes) of the least-squares harmonic fit of ``r`` at orders kmin..kmax of ``theta``: integer
+    orders when the span resolves them (>= 4 revolutions), else a grid of 1/(4 R) (R revolutions covered)."""
+    if revs >= 4.0:
+        ks = np.arange(max(1, int(math.ceil(kmin))), kmax + 1, dtype=float)
+    else:
+        step = 0.25 / max(revs, 1e-9)
+        ks = np.arange(kmin, kmax + step / 2, step)
+        if len(ks) > 2000:
+            ks = np.linspace(kmin, kmax, 2000)
+    amps = np.zeros(len(ks))
+    for i, k in enumerate(ks):
+        X = np.column_stack([np.cos(k * theta), np.sin(k * theta)])
+        coef = np.linalg.lstsq(X, r, rcond=None)[0]
+        amps[i] = float(np.hypot(*coef))
+    return ks, amps
+
+
+def _half_width(ks: np.ndarray, amps: np.ndarray, i: int) -> float:
+    """Half width of the peak at ``ks[i]`` where the amplitude falls to 1/sqrt(2) of it (interpolated); at least
+    half the grid step."""
+    level = amps[i] / math.sqrt(2)
+
+    def edge(direction):
+        j = i
+        while 0 <= j + direction < len(ks) and amps[j + direction] > level:
+            j += direction
+        if not 0 <= j + direction < len(ks):
+            return abs(ks[j] - ks[i])
+        a0, a1 = amps[j], amps[j + direction]
+        x = ks[j] + (ks[j + direction] - ks[j]) * (a0 - level) / max(a0 - a1, 1e-300)
+        return abs(x - ks[i])
+
+    step = float(ks[1] - ks[0]) if len(ks) > 1 else 1.0
+    return max(0.5 * (edge(-1) + edge(1)), 0.5 * step)
 
 
 # ----------------------------------------------------------------------------------------- diagnosis
@@ -262,20 +301,36 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, max_harmonics: int =
         else:
             rejected.append(rec)
 
-    # cogging: the order of the peak of the friction-only residual's angle-order spectrum
+    # cogging: the order of the peak of the friction-only residual's angle-order spectrum. Over a span of R
+    # revolutions orders are resolved to about 1/R: the peak is reported with that uncertainty (the -3 dB half
+    # width of its lobe, ~0.443/R), not refused for a short span; an order needs >= MIN_PERIODS periods in the span
     cog_terms = []
-    if revs >= 1.0:
+    spectrum = None
+    kmin = max(1.0, MIN_PERIODS / max(revs, 1e-9))
+    dth = float(np.median(np.abs(np.diff(th)))) or 1e-9 if n > 1 else 1e-9
+    kmax = int(min(400, max(2, math.pi / dth / 2)))
+    if kmax > kmin:
         _, _, r = fit(accepted_keys, np.ones(n, bool))
-        dth = float(np.median(np.abs(np.diff(th)))) or 1e-9
-        kmax = int(min(400, max(2, math.pi / dth / 2)))
-        amps = order_spectrum(th, r, kmax)
-        order = int(np.argmax(amps[1:]) + 1)
-        floor = float(np.median(amps[1:]))
-        stands_out = amps[order] >= PEAK_OVER_MEDIAN * floor
+        ks, amps_k = order_scan(th, r, kmin, kmax, revs)
+        i = int(np.argmax(amps_k))
+        k_peak = float(ks[i])
+        order = int(round(k_peak))
+        floor = float(np.median(amps_k))
+        peak_amp = float(amps_k[i])
+        # on the integer grid (>= 4 revolutions) the lobe is narrower than the grid: its -3 dB half width 0.443/R
+        order_sd = 0.443 / revs if revs >= 4.0 else _half_width(ks, amps_k, i)
+        stands_out = peak_amp >= PEAK_OVER_MEDIAN * floor
         consistent, why = _consistent(th, r, order, om, both_ways)
+        spectrum = {"order": k_peak, "order_sd": order_sd, "amplitude": peak_amp,
+                    "peak_over_median": peak_amp / max(floor, 1e-300), "revolutions": revs,
+                    "integer_orders": [k for k in range(int(math.floor(k_peak - order_sd)),
+                                                        int(math.ceil(k_peak + order_sd)) + 1)
+                                       if abs(k - k_peak) <= order_sd + 1e-9 and k >= 1],
+                    "angle_locked": bool(stands_out and consistent), "consistency": why}
+        amps = {order: peak_amp}
         if not (stands_out and consistent):
-            notes.append(f"cogging: the order-{order} peak ({amps[order]:.3g} N*m) "
-                         + (f"is only {amps[order] / max(floor, 1e-300):.1f} x the spectrum's median"
+            notes.append(f"cogging: the order-{k_peak:.3g} peak ({peak_amp:.3g} N*m) "
+                         + (f"is only {peak_amp / max(floor, 1e-300):.1f} x the spectrum's median"
                             if not stands_out else f"is not the same in both halves of the data ({why})")
                          + ": not cogging (noise or a time-locked disturbance)")
         for h in range(1, max_harmonics + 1 if stands_out and consistent else 1):
@@ -293,13 +348,15 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, max_harmonics: int =
                 cog_terms.append((h, dbic, before, after))
             else:
                 break
-        notes.append(f"angle-order spectrum of the friction-only residual: peak at order {order} per motor "
-                     f"revolution ({amps[order]:.3g} N*m at the output), {revs:.1f} revolutions covered")
+        notes.append(f"angle-order spectrum of the friction-only residual: peak at order {k_peak:.3g} ± "
+                     f"{order_sd:.2g} per motor revolution ({amps[order]:.3g} N*m at the output, "
+                     f"{peak_amp / max(floor, 1e-300):.1f} x the median), {revs:.2f} revolution(s) covered")
         if cog_terms:
             findings.append(("cogging_torque", [c for h, *_ in cog_terms for c in (f"cog_c{h}", f"cog_s{h}")],
                              sum(t[1] for t in cog_terms), cog_terms[0][2], cog_terms[-1][3]))
-    not_checkable = [] if revs >= 1.0 else [{"effect": "cogging_torque",
-                                              "reason": f"the angle covers {revs:.2f} revolution(s); needs >= 1"}]
+    not_checkable = [] if spectrum is not None else [
+        {"effect": "cogging_torque", "reason": f"the angle covers {revs:.3g} revolution(s): no order up to {kmax} "
+                                               f"completes {MIN_PERIODS:g} periods"}]
 
     coef, cov, r = fit(accepted_keys, np.ones(n, bool))
     idx = {k: i for i, k in enumerate(accepted_keys)}
@@ -326,7 +383,7 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, max_harmonics: int =
             par, unc, un = {"rotor_inertia": float(coef[idx["inertia"]])}, {"rotor_inertia": sd("inertia")}, {"rotor_inertia": "kg*m^2"}
         else:
             par = {"cogging_order": order}
-            unc, un = {}, {"cogging_order": ""}
+            unc, un = {"cogging_order": spectrum["order_sd"]}, {"cogging_order": ""}
             for h, *_ in cog_terms:
                 a, b = float(coef[idx[f"cog_c{h}"]]), float(coef[idx[f"cog_s{h}"]])
                 par[f"cos_{h}"], par[f"sin_{h}"] = a, b
@@ -350,7 +407,7 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, max_harmonics: int =
     final = heldout(accepted_keys)
     return TorqueBalanceResult(out_f, out_r, notes, how, r2,
                                {"metric": "torque_rms", "unit": "N*m", "nominal": nom_rms, "after": final},
-                               not_checkable)
+                               not_checkable, spectrum)
 
 
 def updated_params(params, result: TorqueBalanceResult):

@@ -8,10 +8,14 @@ from __future__ import annotations
 
 import time
 
+import numpy as np
+
 from .. import candidates as cands
+from .. import decidability, residual_structure
 from .. import locate as loc_mod
 from .. import refit
 from ..report import DiagnosisReport
+from ..results import Undecidable, decide
 from ..selection import fit_model
 from .data import Judgement, Model, Say, Search
 from .search import ee_metrics, rms
@@ -19,12 +23,18 @@ from .search import ee_metrics, rms
 
 def not_checkable(s: Search) -> DiagnosisReport:
     """The report when no model equation can be evaluated."""
+    rec = decide([], [Undecidable("no_equation", "no model equation can be evaluated (needs current and velocity "
+                                                 "or position)", "log the motor current and the speed or angle")])
     return DiagnosisReport(channels=sorted(s.ctx.have), findings=[], rejected=[], windows=[],
                            data_issues=s.data_issues,
                            not_checkable=[{"effect": n, "reason": "needs current and velocity or position",
                                            "needs": ["current", "velocity|position"]} for n in s.names],
-                           aliases=[], verdict="not checkable: no model equation can be evaluated "
-                           "(needs current and velocity or position)", notes=s.ctx.notes)
+                           aliases=[], verdict=rec.text(), verdict_record=rec, notes=s.ctx.notes)
+
+
+def _data_notes(signals) -> list[str]:
+    """What loading and cleaning noted about the recording (profile notes, --map over a profile, clocks...)."""
+    return [f"data: {n}" for n in ((getattr(signals, "meta", None) or {}).get("notes") or [])]
 
 
 def _strip(r):
@@ -134,15 +144,39 @@ def run(signals, params, s: Search, j: Judgement, m: Model, options, say: Say, t
     timing = {**s.timing, **m.timing, "show": time.perf_counter() - t0}
     timing["total"] = time.perf_counter() - t_start
     names = [f["effect"] for f in findings]
-    verdict = ("missing physics found: " + ", ".join(names)) if names else \
-        "nothing missing: no candidate effect passed both the ΔBIC and the held-out gate"
+    for f in findings:
+        if (f.get("simulation") or {}).get("verdict") == "not checkable in simulation":
+            f["not_checkable_in_simulation"] = True
     unreproduced = sorted({v.effect for v in j.verdicts if "does not reproduce" in v.message})
     why = next((j.simulation[e]["verdict"].split(": ", 1)[1] for e in unreproduced
                 if "does not reproduce" in j.simulation.get(e, {}).get("verdict", "")), None)
+    clipped = decidability.clipped(getattr(signals, "meta", {}))
+    base_replay = decidability.base_replay(s.replay_nominal, (replay_ho or {}).get("after") if findings else None)
+    if base_replay is not None and findings and all(f.get("not_checkable_in_simulation") for f in findings):
+        # the judge found the motion imposed from outside (a torque sensor): the simulation is not the judge here,
+        # so its failure to follow is a caveat, not a reason to distrust the findings
+        base_replay.blocking = False
+        base_replay.reason += " (the motion is imposed from outside: every finding is not checkable in simulation)"
+    reasons = [u for u in (clipped, base_replay,
+                           # (windows lost to a clipped current are said by the clipped reason)
+                           None if clipped else decidability.holdout(s.starts_holdout, options.window_s,
+                                                                     options.replay)) if u is not None]
+    structures = residual_structure.find(ctx, sel.final_fit)
+    reasons += decidability.outside_catalogue(structures)
+    suffix = ""
     if why:
         msg = (f"equation error alone suggests {', '.join(unreproduced)}, but {why}: check the logging rate against "
                f"the control loops' bandwidth and the drive model")
-        verdict = f"{verdict}; not shown in simulation: {msg}" if names else f"nothing shown in simulation: {msg}"
+        if names:
+            suffix = f"not shown in simulation: {msg}"
+        else:
+            reasons.insert(0, Undecidable("not_shown_in_simulation", f"nothing shown in simulation: {msg}",
+                                          "log faster than the control loops' bandwidth"))
+    base = m.base
+    verdict_rec = decide(names, reasons, prefix=base["message"] if base else "", suffix=suffix,
+                         not_checkable_in_simulation=[f["effect"] for f in findings
+                                                      if f.get("not_checkable_in_simulation")])
+    verdict = verdict_rec.text()
     nominal_m, final_m = ee_metrics(ctx, sel.base_fit), ee_metrics(ctx, sel.final_fit)
     oe = m.output_error
     compare = {"equation_error": {eq: {"nominal": nominal_m[eq], "updated": final_m[eq]} for eq in ctx.blocks},
@@ -152,15 +186,21 @@ def run(signals, params, s: Search, j: Judgement, m: Model, options, say: Say, t
                "output_error_refit": {k: v for k, v in oe.items() if k != "params"} if oe else None,
                "alias_simulation": j.alias_simulation or None}
     say(f"6/6 show: {verdict} ({timing['show']:.2f} s; total {timing['total']:.2f} s)")
+    not_checkable = sel.not_checkable + j.special["not_checkable"]
+    if any(u.code == "clipped" for u in reasons):
+        not_checkable = [x for x in not_checkable if x["effect"] != "torque_constant_error"] + [
+            {"effect": "torque_constant_error", "reason": next(u.reason for u in reasons if u.code == "clipped"),
+             "needs": ["current inside the drive's limit"]}]
     rejected = sel.rejected + j.special["rejected"] + [
         {"effect": v.effect, "form": "practical significance", "verdict": v.kind, "reason": v.message}
         for v in j.verdicts]
-    base = m.base
     report = DiagnosisReport(
         channels=sorted(ctx.have), findings=findings, windows=s.windows, rejected=rejected,
-        data_issues=s.data_issues, not_checkable=sel.not_checkable + j.special["not_checkable"],
-        aliases=_aliases(sel, lib), verdict=(base["message"] + "; " + verdict) if base else verdict,
-        notes=ctx.notes + m.notes + ([base["message"]] if base else []), compare=compare, locate=s.located,
+        data_issues=s.data_issues, not_checkable=not_checkable,
+        aliases=_aliases(sel, lib), verdict=verdict, verdict_record=verdict_rec,
+        residual_structure=[x.to_dict() for x in structures],
+        notes=_data_notes(signals) + ctx.notes + m.notes + ([base["message"]] if base else []), compare=compare,
+        locate=s.located,
         rounds=sel.rounds, correlations=j.final.correlations, not_simulated=m.not_simulated, timing=timing,
         updated_params=m.params, nominal_params=params,
         setup={"rate_hz": ctx.fs, "cutoff_hz": ctx.dec.fc, "decimation": ctx.dec.q, "samples": int(len(ctx.t)),
@@ -171,3 +211,65 @@ def run(signals, params, s: Search, j: Judgement, m: Model, options, say: Say, t
     report._internals = {"ctx": ctx, "sel": sel, "ff": j.final, "nominal_fit": sel.base_fit, "replay_ho": replay_ho,
                          "thermal": j.special}
     return report
+
+
+#: torque-balance parameter -> parameter-file field (what :func:`..torque_balance.updated_params` writes)
+_TB_FIELDS = {"coulomb_friction": "effects.coulomb_friction", "viscous_damping": "motor.viscous_damping",
+              "rotor_inertia": "motor.rotor_inertia", "cogging_order": "effects.cogging_order"}
+
+
+def torque_balance(signals, params, res, options, say: Say, t_start: float) -> DiagnosisReport:
+    """The report of the torque-balance route (:mod:`..torque_balance`: torque and motion, no current) in the
+    same schema as the full route: findings, rejected, not checkable, data issues, ``compare``, the verdict."""
+    from .. import torque_balance as tb_mod
+
+    findings, rejected = [], []
+    for x in res.findings:
+        ev = [f"torque balance: ΔBIC {x.delta_bic:.1f}; held-out torque RMS {x.held_out['before']:.4g} -> "
+              f"{x.held_out['after']:.4g} N*m"]
+        if x.effect == "cogging_torque" and res.spectrum:
+            o = res.spectrum
+            ev.append(f"angle-order peak at order {o['order']:.3g} ± {o['order_sd']:.2g} per motor revolution "
+                      f"({o['amplitude']:.3g} N*m, {o['peak_over_median']:.1f} x the median) over "
+                      f"{o['revolutions']:.2f} revolution(s)")
+        findings.append({"effect": x.effect, "description": f"{x.effect.replace('_', ' ')} (torque balance)",
+                         "form": "torque balance", "parameters": x.parameters, "uncertainty": x.uncertainty,
+                         "units": x.units, "fields": {k: _TB_FIELDS[k] for k in x.parameters if k in _TB_FIELDS},
+                         "simulated": True, "evidence": ev,
+                         "held_out": dict(x.held_out, metric="torque error RMS"),
+                         "metrics": [dict(x.held_out, metric="torque error RMS")],
+                         "delta_bic": x.delta_bic, "correlations": []})
+    for x in res.rejected:
+        rejected.append({"effect": x.effect, "form": "torque balance", "reason": x.reason, "delta_bic": x.delta_bic,
+                         "heldout_gain": (x.held_out.get("before") or 0) - (x.held_out.get("after") or 0)})
+    reasons = []
+    if res.r2 == res.r2 and res.r2 < 0.5:
+        reasons.append(Undecidable("balance_explains_little",
+                                   f"the torque balance explains only {max(0.0, 100 * res.r2):.0f} % of the torque variance "
+                                   f"(the motor was probably powered: its own torque is not logged without current)",
+                                   "log the motor current, or turn the motor unpowered"))
+    if not res.held_out:
+        reasons.append(Undecidable("too_few_samples", "; ".join(res.notes[-1:]), "record longer"))
+    rec = decide([f["effect"] for f in findings], reasons)
+    verdict = rec.text()
+    ho = res.held_out or {}
+    compare = {"equation_error": {"torque_balance": {
+                   "nominal": {"holdout_rms": ho.get("nominal"), "train_rms": None, "unit": "N*m"},
+                   "updated": {"holdout_rms": ho.get("after"), "train_rms": None, "unit": "N*m"}}},
+               "replay": None, "thermal": None, "output_error_refit": None, "alias_simulation": None,
+               "torque_balance": {"angle_source": res.angle_source, "r2": res.r2, "held_out": ho,
+                                  "order_spectrum": res.spectrum}}
+    timing = {"total": time.perf_counter() - t_start}
+    say(f"6/6 show: {verdict} (total {timing['total']:.2f} s)")
+    issues = [i.to_dict() if hasattr(i, "to_dict") else dict(i) for i in getattr(signals, "issues", [])]
+    rate = (getattr(signals, "meta", {}) or {}).get("rate_hz")
+    return DiagnosisReport(
+        channels=sorted(c for c, v in signals.channels.items() if np.isfinite(v).any()), findings=findings,
+        rejected=rejected, windows=[], data_issues=issues, not_checkable=list(res.not_checkable), aliases=[],
+        verdict=verdict, verdict_record=rec, notes=_data_notes(signals) + list(res.notes), compare=compare,
+        updated_params=tb_mod.updated_params(params, res), nominal_params=params, timing=timing,
+        method="torque balance (no motor current)",
+        setup={"rate_hz": rate, "samples": int(len(signals.time)), "holdout": f"{options.holdout:g} of the samples "
+               "(interleaved blocks)", "effects_tested": ["coulomb_friction", "viscous_friction", "inertia_error",
+                                                          "cogging_torque"],
+               "source": getattr(signals, "source", "")})
