@@ -160,10 +160,10 @@ def _process_joint(job: Job, joint, mapping) -> tuple[list[dict], list[dict]]:
     base["data_issues"] = " | ".join(f"{k} {c}: {d}" for k, c, d in issues)
     serious = sorted({k for k, _, _ in issues if k in SERIOUS_ISSUES})
     from ..diagnosis import torque_balance
+    from ..diagnosis.pipeline import TORQUE_BALANCE, route
 
-    # ROUTING (duplicated here until diagnosis has one entry point that chooses the route): a log with torque
-    # and motion but no current goes through the torque balance, everything else through the full pipeline
-    if torque_balance.applicable(sig):
+    # the route is the diagnosis' own choice (pipeline.route); fleet keeps its row builder for the torque balance
+    if route(sig) == TORQUE_BALANCE:
         res = torque_balance.diagnose(sig, params, holdout=job.holdout)
         return _with_issues(_torque_balance_rows(base, res), serious), []
     from ..diagnosis import equation_error as ee
@@ -184,7 +184,7 @@ def _process_joint(job: Job, joint, mapping) -> tuple[list[dict], list[dict]]:
 
 
 def _diagnose(sig, params, holdout: float) -> dict:
-    """The ONE call into the diagnosis pipeline (swap for ``pipeline.diagnose()`` with routing here)."""
+    """The ONE call into the full diagnosis pipeline (:func:`bldc_actuator.diagnosis.pipeline.diagnose`)."""
     from ..diagnosis.pipeline import DiagnoseOptions, diagnose
 
     return diagnose(sig, params, options=DiagnoseOptions(holdout=holdout)).to_dict()
