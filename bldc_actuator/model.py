@@ -351,6 +351,35 @@ class _Base:
             for c, s in zip(self._rc, self._rs):
                 kernel.step(c, s, dt_ns)
 
+    def prescribe_motion(self, omega, acc=0.0, theta=None) -> None:
+        """Prescribed-motion mode, for a multibody that integrates the mechanics (:mod:`bldc_actuator.mujoco`):
+        the steps that follow advance the drive, electrical and thermal states with the rotor speed given as
+        ``omega + acc·t`` [rad/s, rad/s², motor side, from now] and the angle ``theta`` [rad] (kept if None);
+        the rotor inertia, damping, friction and load of the parameters are then the body's to apply (the
+        kernel's ledger keeps only the electrical and thermal terms meaningful: :attr:`impulse_em`,
+        :attr:`magnetic_work`). Call it before every body step; :meth:`release_motion` ends the mode."""
+        self._set("omega", omega)
+        self._set("acc", acc)
+        if theta is not None:
+            self._set("theta", theta)
+        self._set("prescribed", True)
+
+    def release_motion(self) -> None:
+        """End :meth:`prescribe_motion`: the actuator's own mechanical equation moves the rotor again."""
+        self._set("prescribed", False)
+
+    @property
+    def impulse_em(self):
+        """∫ τ_em dt since t = 0 [N·m·s, motor side]: its increase over a step divided by the step's length is the
+        step's mean electromagnetic torque (what a coupled body receives)."""
+        return self._get("imp_em")
+
+    @property
+    def magnetic_work(self):
+        """∫ K ω i_q dt since t = 0 [J]: the electrical energy converted to mechanical work (at the speed the
+        kernel saw: its own, or the prescribed one)."""
+        return self._get("e_em")
+
     def _ledger_values(self):
         c, g = self._c, self._get
         return dict(electrical_in=g("e_in"), joule=g("e_joule"), magnetic=0.5 * c.L * abs(g("i")) ** 2,
