@@ -80,11 +80,13 @@ class CoupledLedger:
         return self.body_work - self.load_work + self.passive_work - self.kinetic - self.potential
 
 
-def _as_params(value, joint: str) -> ActuatorParams:
+def _as_params(value, joint: str, loaded: dict) -> ActuatorParams:
     if isinstance(value, ActuatorParams):
         return value
     if isinstance(value, (str, Path)):
-        return load_preset(value)
+        if str(value) not in loaded:                  # one parse per preset or file, however many joints
+            loaded[str(value)] = load_preset(value)
+        return loaded[str(value)]
     raise TypeError(f"actuators[{joint!r}]: expected ActuatorParams, a preset name or a parameter file path, "
                     f"got {type(value).__name__}")
 
@@ -131,7 +133,7 @@ class CoupledSim:
         self.data = mujoco.MjData(m)
         self.joints: list[str] = list(actuators)
         self.params: list[ActuatorParams] = []
-        dofs, qadrs = [], []
+        dofs, qadrs, loaded = [], [], {}
         for name in self.joints:
             jid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name)
             if jid < 0:
@@ -140,7 +142,7 @@ class CoupledSim:
             if int(m.jnt_type[jid]) not in _JOINT_TYPES:
                 raise ValueError(f"actuators[{name!r}]: expected a hinge or slide joint, got joint type "
                                  f"{int(m.jnt_type[jid])} (free and ball joints have no single axis)")
-            p = _as_params(actuators[name], name)
+            p = _as_params(actuators[name], name, loaded)
             ld = p.load
             for field in ("gravity_torque", "spring_stiffness"):
                 if getattr(ld, field) != 0.0:
@@ -172,6 +174,7 @@ class CoupledSim:
         self._load = np.zeros(len(self.joints))
         self.actuators = BatchActuator(self.params)
         self._cmd_q = np.zeros(len(self.joints))
+        self._cmd_dirty = False
         mujoco.mj_forward(m, self.data)
         self._v_prev = self.data.qvel[self._dof].copy()
         self._effort = np.zeros(len(self.joints))
@@ -194,7 +197,7 @@ class CoupledSim:
         if not math.isfinite(i_q_ref):
             raise ValueError(f"current command {joint}: expected a finite q-axis current [A], got {i_q_ref!r}")
         self._cmd_q[self._k(joint)] = i_q_ref
-        self.actuators.set_current_command(self._cmd_q)
+        self._cmd_dirty = True                 # handed to the drives at the next body step, all joints at once
 
     def set_torque_command(self, joint: str, tau_out: float) -> None:
         """Output torque command [N·m] → ``i_q_ref = τ/(K_t_q N)`` with the nominal constant."""
@@ -243,6 +246,9 @@ class CoupledSim:
         q = d.qpos[self._qadr]
         v = d.qvel[self._dof]
         a = (v - self._v_prev) / h
+        if self._cmd_dirty:
+            act.set_current_command(self._cmd_q)
+            self._cmd_dirty = False
         act.prescribe_motion(N * v, N * a, N * q)
         imp0 = act.impulse_em
         act.step_ns(self._h_ns)
