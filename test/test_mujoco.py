@@ -190,3 +190,22 @@ def test_prescribed_motion_holds_the_rotor_where_told():
     assert s.v_q == pytest.approx(R * s.i_q + p.motor.torque_constant_q * 100.0
                                   + p.motor.pole_pairs * 100.0 * p.motor.q_inductance * s.i_d, rel=1e-3)
     assert (act.impulse_em - imp0) / 0.05 == pytest.approx(p.motor.torque_constant_q * 10.0, rel=1e-3)
+
+
+def test_rotor_inertia_moves_with_the_body():
+    """A light flywheel (0.001 kg·m²) is dominated by the reflected rotor inertia J N² (0.00486 kg·m²): under a
+    constant torque its speed ramps at (τ - τ_c N)/(I + J N²), not at the body's own rate."""
+    p = _params(viscous=0.0)
+    xml = """<mujoco><option timestep="0.001" gravity="0 0 0"/><worldbody><body name="disc">
+    <joint name="j" type="hinge" axis="0 0 1"/><inertial pos="0 0 0" mass="1" diaginertia="0.001 0.001 0.001"/>
+    </body></worldbody></mujoco>"""
+    sim = CoupledSim(xml, {"j": p})
+    sim.set_torque_command("j", 3.0)
+    sim.step(0.005)                                      # the current loop has settled
+    w0, t0 = sim.joint_state("j").velocity, sim.t
+    sim.step(0.02)
+    N = p.gear.gear_ratio
+    rate = (sim.joint_state("j").velocity - w0) / (sim.t - t0)
+    expected = (3.0 - p.effects.coulomb_friction * N) / (0.001 + p.motor.rotor_inertia * N * N)
+    assert rate == pytest.approx(expected, rel=5e-3)
+    assert not sim.outputs("j")["voltage_saturated"]

@@ -167,6 +167,7 @@ class CoupledSim:
             m.dof_armature[dof] = p.motor.rotor_inertia * N * N
             m.dof_damping[dof] = (p.motor.viscous_damping + p.effects.iron_loss_eddy) * N * N
             m.dof_frictionloss[dof] = (p.effects.coulomb_friction + p.effects.iron_loss_hysteresis) * N
+        mujoco.mj_setConst(m, mujoco.MjData(m))   # the constants derived from them (dof_M0, invweight, ...)
         self._fric = np.array([[x.coulomb_friction, x.friction_asymmetry, x.stribeck_friction, x.stribeck_velocity]
                                for x in e])
         self._explicit_friction = bool(np.any(self._fric[:, 1]) or np.any(self._fric[:, 2]))
