@@ -209,3 +209,16 @@ def test_rotor_inertia_moves_with_the_body():
     expected = (3.0 - p.effects.coulomb_friction * N) / (0.001 + p.motor.rotor_inertia * N * N)
     assert rate == pytest.approx(expected, rel=5e-3)
     assert not sim.outputs("j")["voltage_saturated"]
+
+
+def test_leg_example_runs_into_the_drive_limits_and_not_past_them():
+    """The shipped leg: the PD asks for more than the drives have; the torque the joints receive reaches the
+    current limit's torque (K_t N I_lim) and never exceeds it, and the harder-worked winding heats."""
+    from bldc_actuator.mujoco.leg_example import run_leg
+
+    run = run_leg(seconds=1.2)
+    for j in ("hip", "knee"):
+        assert np.max(np.abs(run.command[j])) > 1.3 * run.limit[j][0]
+        peak = np.max(np.abs(run.torque[j]))
+        assert 0.98 * run.limit[j][0] < peak < 1.005 * run.limit[j][0]
+        assert run.T_winding[j][-1] > run.T_winding[j][0]
