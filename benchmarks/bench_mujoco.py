@@ -33,8 +33,7 @@ def _pose(model, data) -> None:
 
 def run_coupled(seconds: float, preset: str) -> tuple[float, float]:
     sim = CoupledSim(config_dir() / "quadruped12.xml", {j: preset for j in JOINTS})
-    _pose(sim.model, sim.data)
-    sim.step(sim.timestep)                              # let the coupling see the pose once
+    sim.set_pose({j: STAND[j.split("_")[1]] for j in JOINTS})
     target = np.array([STAND[j.split("_")[1]] for j in JOINTS])
     qadr = [sim.model.jnt_qposadr[mujoco.mj_name2id(sim.model, mujoco.mjtObj.mjOBJ_JOINT, j)] for j in JOINTS]
     dadr = [sim.model.jnt_dofadr[mujoco.mj_name2id(sim.model, mujoco.mjtObj.mjOBJ_JOINT, j)] for j in JOINTS]

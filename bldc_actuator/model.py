@@ -580,6 +580,24 @@ class BatchActuator(_Base):
         s("acc", np.zeros(n))
         s("v_mode", False)
 
+    def update_params(self, params: Sequence[ActuatorParams]) -> None:
+        """Replace every element's parameters (same count); the states carry on (see :meth:`Actuator.update_params`)."""
+        params = list(params)
+        if len(params) != len(self):
+            raise ValueError(f"params: expected {len(self)} parameter sets, got {len(params)}")
+        self.params = params
+        self._new_coeffs(params)
+        self._winding = np.array([p.motor.winding for p in params])
+
+    def reset_fault(self, index: int | None = None) -> np.ndarray:
+        """Clear the latched over-temperature trip of element ``index`` (all if None); returns the trip flags
+        as they were."""
+        was = np.asarray(self._get("tripped"), dtype=bool)
+        now = was.copy()
+        now[slice(None) if index is None else index] = False
+        self._set("tripped", now)
+        return was
+
     def field(self, name: str) -> np.ndarray:
         """One raw kernel state field over the batch (a copy): ``i`` (complex ``i_d + j i_q`` [A]),
         ``omega`` [rad/s], ``theta`` [rad], ``T_w``/``T_h`` [°C], ``v``/``z`` (complex [V]), ``i_ref`` [A], ...

@@ -222,3 +222,24 @@ def test_leg_example_runs_into_the_drive_limits_and_not_past_them():
         peak = np.max(np.abs(run.torque[j]))
         assert 0.98 * run.limit[j][0] < peak < 1.005 * run.limit[j][0]
         assert run.T_winding[j][-1] > run.T_winding[j][0]
+
+
+def test_plant_protocol_members():
+    """The names the node's scheduler steps a plant through, on the coupled simulation: a parameter change
+    reaches the body (armature) and the drive (current limit), a latched trip is reported and cleared."""
+    sim = CoupledSim(pendulum_xml(), {"j": "ak80_9"})
+    assert sim.joints == ["j"] and sim.t_ns == 0
+    sim.set_pose({"j": 0.5})
+    assert sim.outputs("j")["position_out"] == pytest.approx(0.5)
+    sim.step_ns(2_000_000)
+    assert sim.t_ns == 2_000_000 and len(sim.all_outputs()) == 1
+    p = sim.params("j")
+    sim.update_params("j", p.replace(**{"motor.rotor_inertia": 2 * p.motor.rotor_inertia,
+                                        "drive.current_limit": 5.0}))
+    assert sim.model.dof_armature[0] == pytest.approx(2 * p.motor.rotor_inertia * p.gear.gear_ratio ** 2)
+    sim.set_current_command("j", 20.0)
+    sim.step(0.01)
+    assert sim.outputs("j")["i_q_ref"] == pytest.approx(5.0)
+    assert sim.reset_fault("j") is False
+    with pytest.raises(ValueError, match="load.gravity_torque"):
+        sim.update_params("j", p.replace(**{"load.gravity_torque": 1.0}))

@@ -91,6 +91,14 @@ def _as_params(value, joint: str, loaded: dict) -> ActuatorParams:
                     f"got {type(value).__name__}")
 
 
+def _checked(p: ActuatorParams, joint: str) -> ActuatorParams:
+    for field in ("gravity_torque", "spring_stiffness"):
+        if getattr(p.load, field) != 0.0:
+            raise ValueError(f"actuators[{joint!r}]: load.{field} must be 0 when a body is coupled "
+                             f"(the MJCF model carries gravity and springs), got {getattr(p.load, field)}")
+    return p
+
+
 def load_model(mjcf) -> mujoco.MjModel:
     """An ``MjModel`` from a path to an MJCF file, an MJCF string or a model (returned as is)."""
     if isinstance(mjcf, mujoco.MjModel):
@@ -131,10 +139,10 @@ class CoupledSim:
         m.opt.timestep = self._h_ns * 1e-9
         self._h = self._h_ns * 1e-9
         self.data = mujoco.MjData(m)
-        self.joints: list[str] = list(actuators)
-        self.params: list[ActuatorParams] = []
+        self._joints: list[str] = list(actuators)
+        self._params: list[ActuatorParams] = []
         dofs, qadrs, loaded = [], [], {}
-        for name in self.joints:
+        for name in self._joints:
             jid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name)
             if jid < 0:
                 have = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j) for j in range(m.njnt)]
@@ -142,48 +150,92 @@ class CoupledSim:
             if int(m.jnt_type[jid]) not in _JOINT_TYPES:
                 raise ValueError(f"actuators[{name!r}]: expected a hinge or slide joint, got joint type "
                                  f"{int(m.jnt_type[jid])} (free and ball joints have no single axis)")
-            p = _as_params(actuators[name], name, loaded)
-            ld = p.load
-            for field in ("gravity_torque", "spring_stiffness"):
-                if getattr(ld, field) != 0.0:
-                    raise ValueError(f"actuators[{name!r}]: load.{field} must be 0 when a body is coupled "
-                                     f"(the MJCF model carries gravity and springs), got {getattr(ld, field)}")
-            self.params.append(p)
+            p = _checked(_as_params(actuators[name], name, loaded), name)
+            self._params.append(p)
             dofs.append(int(m.jnt_dofadr[jid]))
             qadrs.append(int(m.jnt_qposadr[jid]))
         self._dof = np.array(dofs)
         self._qadr = np.array(qadrs)
-        self._index = {name: k for k, name in enumerate(self.joints)}
-        self._N = np.array([p.gear.gear_ratio for p in self.params])
-        self._K_nom = np.array([p.motor.torque_constant_q for p in self.params])
-        e = [p.effects for p in self.params]
-        # the mechanics the body integrates: reflected rotor inertia, drag, symmetric dry friction
-        for k, (p, dof) in enumerate(zip(self.params, dofs)):
-            N = self._N[k]
+        self._index = {name: k for k, name in enumerate(self._joints)}
+        for k, dof in enumerate(dofs):
             had = (float(m.dof_armature[dof]), float(m.dof_damping[dof]), float(m.dof_frictionloss[dof]))
             if any(had):
                 log.warning("joint %s: the MJCF armature/damping/frictionloss %s are replaced by the actuator's "
-                            "(rotor inertia, drag and friction through the gear)", self.joints[k], had)
+                            "(rotor inertia, drag and friction through the gear)", self._joints[k], had)
+        self._apply_params()
+        self._load = np.zeros(len(self._joints))
+        self.actuators = BatchActuator(self._params)
+        self._cmd_q = np.zeros(len(self._joints))
+        self._cmd_dirty = False
+        mujoco.mj_forward(m, self.data)
+        self._v_prev = self.data.qvel[self._dof].copy()
+        self._effort = np.zeros(len(self._joints))
+        self._t_ns = 0
+        self._out_cache: tuple[int, dict] | None = None
+        self._restart_ledger()
+
+    def _restart_ledger(self) -> None:
+        self._e0 = self._body_energy()
+        self._w_body = self._w_load = self._w_passive = 0.0
+        self._mag0 = self._magnetic()
+        self._e_act0 = (float(np.sum(self.actuators.energy.electrical_in)), float(np.sum(self.actuators.energy.joule)),
+                        float(np.sum(self.actuators.magnetic_work)))
+
+    @property
+    def joints(self) -> list[str]:
+        """The coupled joints, in the order of every batched call."""
+        return list(self._joints)
+
+    def set_pose(self, positions: Mapping[str, float]) -> None:
+        """Place joints (any of the model's hinge/slide joints, by name) at rest at the given positions [rad or m],
+        before or between runs; the energy ledger restarts from this state."""
+        m, d = self.model, self.data
+        for name, value in positions.items():
+            jid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name)
+            if jid < 0 or int(m.jnt_type[jid]) not in _JOINT_TYPES:
+                raise ValueError(f"set_pose: no hinge or slide joint named {name!r}")
+            if not math.isfinite(value):
+                raise ValueError(f"set_pose[{name!r}]: expected a finite position, got {value!r}")
+            d.qpos[m.jnt_qposadr[jid]] = value
+            d.qvel[m.jnt_dofadr[jid]] = 0.0
+        mujoco.mj_forward(m, d)
+        self._v_prev = d.qvel[self._dof].copy()
+        self._out_cache = None
+        self._restart_ledger()
+
+    def _apply_params(self) -> None:
+        """The parameters' mechanics into the body (reflected rotor inertia, drag, symmetric dry friction) and
+        the per-joint constants of the coupling."""
+        m, ps = self.model, self._params
+        self._N = np.array([p.gear.gear_ratio for p in ps])
+        self._K_nom = np.array([p.motor.torque_constant_q for p in ps])
+        for p, dof, N in zip(ps, self._dof, self._N):
             m.dof_armature[dof] = p.motor.rotor_inertia * N * N
             m.dof_damping[dof] = (p.motor.viscous_damping + p.effects.iron_loss_eddy) * N * N
             m.dof_frictionloss[dof] = (p.effects.coulomb_friction + p.effects.iron_loss_hysteresis) * N
         mujoco.mj_setConst(m, mujoco.MjData(m))   # the constants derived from them (dof_M0, invweight, ...)
-        self._fric = np.array([[x.coulomb_friction, x.friction_asymmetry, x.stribeck_friction, x.stribeck_velocity]
-                               for x in e])
+        self._fric = np.array([[p.effects.coulomb_friction, p.effects.friction_asymmetry,
+                                p.effects.stribeck_friction, p.effects.stribeck_velocity] for p in ps])
         self._explicit_friction = bool(np.any(self._fric[:, 1]) or np.any(self._fric[:, 2]))
-        self._load0 = np.array([p.load.load_torque for p in self.params])
-        self._load = np.zeros(len(self.joints))
-        self.actuators = BatchActuator(self.params)
-        self._cmd_q = np.zeros(len(self.joints))
-        self._cmd_dirty = False
-        mujoco.mj_forward(m, self.data)
-        self._v_prev = self.data.qvel[self._dof].copy()
-        self._effort = np.zeros(len(self.joints))
-        self._t_ns = 0
-        self._out_cache: tuple[int, dict] | None = None
-        self._e0 = self._body_energy()
-        self._w_body = self._w_load = self._w_passive = 0.0
-        self._mag0 = self._magnetic()
+        self._load0 = np.array([p.load.load_torque for p in ps])
+
+    def params(self, joint: str) -> ActuatorParams:
+        """The joint's actuator parameters."""
+        return self._params[self._k(joint)]
+
+    def update_params(self, joint: str, params: ActuatorParams) -> None:
+        """Replace the joint's actuator parameters at run time (bus voltage, limits, friction, ambient...); the
+        state carries on, the body takes the new inertia, drag and friction."""
+        k = self._k(joint)
+        self._params[k] = _checked(params, joint)
+        self.actuators.update_params(self._params)
+        self._apply_params()
+        self._out_cache = None
+
+    def reset_fault(self, joint: str) -> bool:
+        """Clear the joint's latched over-temperature trip; returns whether one was latched."""
+        self._out_cache = None
+        return bool(self.actuators.reset_fault(self._k(joint))[self._k(joint)])
 
     # -- commands --------------------------------------------------------------------------------------------
 
@@ -191,7 +243,7 @@ class CoupledSim:
         try:
             return self._index[joint]
         except KeyError:
-            raise ValueError(f"joint: no coupled joint {joint!r} (have: {', '.join(self.joints)})") from None
+            raise ValueError(f"joint: no coupled joint {joint!r} (have: {', '.join(self._joints)})") from None
 
     def set_current_command(self, joint: str, i_q_ref: float) -> None:
         """q-axis current command [A] of the joint's actuator (limited by its drive)."""
@@ -292,6 +344,10 @@ class CoupledSim:
         out["effort_applied"] = float(self._effort[k])
         return out
 
+    def all_outputs(self) -> list[dict[str, Any]]:
+        """:meth:`outputs` of every joint, in :attr:`joints` order."""
+        return [self.outputs(j) for j in self._joints]
+
     def joint_state(self, joint: str) -> JointState:
         """Position, velocity and applied effort at the output, and every actuator output."""
         out = self.outputs(joint)
@@ -307,7 +363,7 @@ class CoupledSim:
 
     def _magnetic(self) -> float:
         i = self.actuators.field("i")
-        L = np.array([p.motor.q_inductance for p in self.params])
+        L = np.array([p.motor.q_inductance for p in self._params])
         return float(np.sum(0.5 * L * np.abs(i) ** 2))
 
     @property
@@ -315,8 +371,10 @@ class CoupledSim:
         """The energy ledger since the start (see :class:`CoupledLedger`)."""
         led = self.actuators.energy
         pot, kin = self._body_energy()
+        e_in0, joule0, work0 = self._e_act0
         return CoupledLedger(
-            electrical_in=float(np.sum(led.electrical_in)), joule=float(np.sum(led.joule)),
-            magnetic=self._magnetic() - self._mag0, magnetic_work=float(np.sum(self.actuators.magnetic_work)),
+            electrical_in=float(np.sum(led.electrical_in)) - e_in0, joule=float(np.sum(led.joule)) - joule0,
+            magnetic=self._magnetic() - self._mag0,
+            magnetic_work=float(np.sum(self.actuators.magnetic_work)) - work0,
             body_work=self._w_body, load_work=self._w_load, passive_work=self._w_passive,
             kinetic=kin - self._e0[1], potential=pot - self._e0[0])

@@ -42,10 +42,8 @@ def run_leg(seconds: float = 6.0, hip: str = "tmotor_u8", knee: str = "ak80_9", 
     ids = {j: mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, j) for j in ("hip", "knee")}
     qadr = {j: m.jnt_qposadr[i] for j, i in ids.items()}
     dadr = {j: m.jnt_dofadr[i] for j, i in ids.items()}
-    for j, q0 in zip(("hip", "knee"), CROUCH):
-        d.qpos[qadr[j]] = q0
-    mujoco.mj_forward(m, d)
-    Kt_N = {j: p.motor.torque_constant_q * p.gear.gear_ratio for j, p in zip(sim.joints, sim.params)}
+    sim.set_pose(dict(zip(("hip", "knee"), CROUCH)))
+    Kt_N = {j: sim.params(j).motor.torque_constant_q * sim.params(j).gear.gear_ratio for j in sim.joints}
     rec = {key: {j: [] for j in ("hip", "knee")} for key in ("angle", "target", "command", "torque", "limit", "T")}
     t_rec, z_rec = [], []
     for _ in range(int(round(seconds / sim.timestep))):
