@@ -25,6 +25,11 @@ Integration over each interval ``h`` between controller ticks (or shorter, when 
 
 So the energy ledger closes to round-off, and trajectories agree across step sizes.
 
+Prescribed motion (:meth:`Actuator.prescribe_motion`, for a multibody that integrates the mechanics, see
+:mod:`bldc_actuator.mujoco`): the mechanical equation is replaced by a given speed ramp ``ω0 + a t``; the
+electrical, drive and thermal equations are the same, and the kernel accumulates the torque impulse ``∫K i_q dt``
+(the mean torque a body receives) and the magnetic work ``∫K ω i_q dt``.
+
 One kernel (:mod:`bldc_actuator.kernel`: :func:`~bldc_actuator.kernel.advance`,
 :func:`~bldc_actuator.kernel.control_tick`, ...) serves both :class:`Actuator` and :class:`BatchActuator`
 (many actuators or parameter sets). It is written once, per actuator, and compiled with numba when numba is
