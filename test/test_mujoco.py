@@ -262,3 +262,15 @@ def test_asymmetric_and_stribeck_friction_reach_the_body():
     w_plain, _ = steady_speed_analytic(load_preset("ak80_9"), out["T_winding"], out["T_housing"], 3.0, 20.0)
     assert abs(w - w_plain) > 5e-3 * w_plain              # the extra friction matters at this speed (0.75 %)
     assert out["velocity_out"] == pytest.approx(w, rel=1e-4)
+
+
+def test_body_state_names_every_coordinate():
+    from bldc_actuator.params import config_dir
+
+    sim = CoupledSim(config_dir() / "quadruped12.xml", {"FL_knee": "ak80_9"})
+    labels = sim.body_state_labels()
+    assert len(labels) == sim.model.nq + sim.model.nv == len(sim.body_state())
+    assert labels[:3] == ("qpos.base.x", "qpos.base.y", "qpos.base.z")
+    k = labels.index("qpos.FL_knee")
+    sim.set_pose({"FL_knee": -1.2})
+    assert sim.body_state()[k] == -1.2

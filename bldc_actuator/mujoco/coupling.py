@@ -354,6 +354,24 @@ class CoupledSim:
         return JointState(position=out["position_out"], velocity=out["velocity_out"],
                           effort=out["effort_applied"], outputs=out)
 
+    def body_state_labels(self) -> tuple[str, ...]:
+        """Names of :meth:`body_state`'s entries: every ``qpos`` then every ``qvel`` entry of the whole model
+        (``qpos.<joint>`` for a hinge/slide, ``qpos.<joint>.x``...``.qz`` for a free joint, ...)."""
+        m = self.model
+        pos_suffix = {0: (".x", ".y", ".z", ".qw", ".qx", ".qy", ".qz"), 1: (".qw", ".qx", ".qy", ".qz")}
+        vel_suffix = {0: (".vx", ".vy", ".vz", ".wx", ".wy", ".wz"), 1: (".wx", ".wy", ".wz")}
+        qpos, qvel = [], []
+        for j in range(m.njnt):
+            name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j) or f"joint{j}"
+            t = int(m.jnt_type[j])
+            qpos += [f"qpos.{name}{s}" for s in pos_suffix.get(t, ("",))]
+            qvel += [f"qvel.{name}{s}" for s in vel_suffix.get(t, ("",))]
+        return tuple(qpos + qvel)
+
+    def body_state(self) -> np.ndarray:
+        """The whole multibody's state now: ``qpos`` then ``qvel`` (see :meth:`body_state_labels`), SI."""
+        return np.concatenate((self.data.qpos, self.data.qvel))
+
     def _body_energy(self) -> tuple[float, float]:
         m, d = self.model, self.data
         mujoco.mj_fwdPosition(m, d)
