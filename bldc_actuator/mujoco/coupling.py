@@ -318,8 +318,8 @@ class CoupledSim:
         dq = d.qpos[self._qadr] - q
         self._w_body += float(tau @ dq)
         self._w_load += float(load @ dq)
-        # every dof (a free base too): passive (springs are potential energy) and constraint forces, the damping at the new
-        # speed (MuJoCo's Euler integrates it implicitly), and the explicit friction of the coupled joints
+        # every dof (a free base too): passive (springs are potential energy) and constraint forces, the damping
+        # at the new speed (MuJoCo's Euler integrates it implicitly), and the coupled joints' explicit friction
         dq_all = d.qvel * h
         self._w_passive += float((d.qfrc_passive - d.qfrc_spring - d.qfrc_damper + d.qfrc_constraint) @ dq_all
                                  - (m.dof_damping * d.qvel) @ dq_all + (frc - tau + load) @ dq)
