@@ -40,9 +40,7 @@ def run_coupled(seconds: float, preset: str) -> tuple[float, float]:
     n = int(round(seconds / sim.timestep))
     t0 = time.perf_counter()
     for _ in range(n):
-        tau = KP * (target - sim.data.qpos[qadr]) - KD * sim.data.qvel[dadr]
-        for j, tj in zip(JOINTS, tau):
-            sim.set_torque_command(j, float(tj))
+        sim.set_torque_commands(KP * (target - sim.data.qpos[qadr]) - KD * sim.data.qvel[dadr])
         sim.step(sim.timestep)
     wall = time.perf_counter() - t0
     return seconds / wall, float(sim.data.qpos[2])

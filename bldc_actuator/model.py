@@ -612,7 +612,9 @@ class BatchActuator(_Base):
         return self._get(name)
 
     def set_current_command(self, i_q_ref) -> None:
-        self._set("cmd_q", np.broadcast_to(np.asarray(i_q_ref, dtype=float), (len(self),)))
+        if not (isinstance(i_q_ref, np.ndarray) and i_q_ref.shape == (len(self),)):   # (the coupling's hot path)
+            i_q_ref = np.broadcast_to(np.asarray(i_q_ref, dtype=float), (len(self),))
+        self._set("cmd_q", i_q_ref)
         self._set("v_mode", False)
 
     def set_torque_command(self, tau_out) -> None:

@@ -241,6 +241,11 @@ def test_plant_protocol_members():
     sim.step(0.01)
     assert sim.outputs("j")["i_q_ref"] == pytest.approx(5.0)
     assert sim.reset_fault("j") is False
+    sim.set_torque_commands([1.0])
+    sim.step(0.002)
+    assert sim.outputs("j")["i_q_ref"] == pytest.approx(1.0 / (p.motor.torque_constant_q * p.gear.gear_ratio))
+    with pytest.raises(ValueError, match="1 finite output torques"):
+        sim.set_torque_commands([1.0, 2.0])
     with pytest.raises(ValueError, match="load.gravity_torque"):
         sim.update_params("j", p.replace(**{"load.gravity_torque": 1.0}))
 

@@ -208,7 +208,7 @@ class CoupledSim:
         the per-joint constants of the coupling."""
         m, ps = self.model, self._params
         self._N = np.array([p.gear.gear_ratio for p in ps])
-        self._K_nom = np.array([p.motor.torque_constant_q for p in ps])
+        self._Kt_N = np.array([p.motor.torque_constant_q * p.gear.gear_ratio for p in ps])   # torque -> current
         for p, dof, N in zip(ps, self._dof, self._N):
             m.dof_armature[dof] = p.motor.rotor_inertia * N * N
             m.dof_damping[dof] = (p.motor.viscous_damping + p.effects.iron_loss_eddy) * N * N
@@ -218,6 +218,7 @@ class CoupledSim:
                                 p.effects.stribeck_friction, p.effects.stribeck_velocity] for p in ps])
         self._explicit_friction = bool(np.any(self._fric[:, 1]) or np.any(self._fric[:, 2]))
         self._load0 = np.array([p.load.load_torque for p in ps])
+        self._load_total = self._load0 + getattr(self, "_load", 0.0)
 
     def params(self, joint: str) -> ActuatorParams:
         """The joint's actuator parameters."""
@@ -240,10 +241,10 @@ class CoupledSim:
     # -- commands --------------------------------------------------------------------------------------------
 
     def _k(self, joint: str) -> int:
-        try:
-            return self._index[joint]
-        except KeyError:
-            raise ValueError(f"joint: no coupled joint {joint!r} (have: {', '.join(self._joints)})") from None
+        k = self._index.get(joint)
+        if k is None:
+            raise ValueError(f"joint: no coupled joint {joint!r} (have: {', '.join(self._joints)})")
+        return k
 
     def set_current_command(self, joint: str, i_q_ref: float) -> None:
         """q-axis current command [A] of the joint's actuator (limited by its drive)."""
@@ -257,13 +258,24 @@ class CoupledSim:
         if not math.isfinite(tau_out):
             raise ValueError(f"torque command {joint}: expected a finite output torque [N*m], got {tau_out!r}")
         k = self._k(joint)
-        self.set_current_command(joint, tau_out / (self._K_nom[k] * self._N[k]))
+        self._cmd_q[k] = tau_out / self._Kt_N[k]
+        self._cmd_dirty = True
+
+    def set_torque_commands(self, tau_out) -> None:
+        """Output torque commands [N·m] of every joint at once, in :attr:`joints` order."""
+        tau = np.asarray(tau_out, dtype=float)
+        if tau.shape != (len(self._joints),) or not np.all(np.isfinite(tau)):
+            raise ValueError(f"torque commands: expected {len(self._joints)} finite output torques [N*m] in "
+                             f"joints order, got {tau_out!r}")
+        self._cmd_q[:] = tau / self._Kt_N
+        self._cmd_dirty = True
 
     def set_load_torque(self, joint: str, tau_out: float) -> None:
         """Extra external load torque at the joint [N·m] (opposes positive motion), on top of the body's own."""
         if not math.isfinite(tau_out):
             raise ValueError(f"load torque {joint}: expected a finite output torque [N*m], got {tau_out!r}")
         self._load[self._k(joint)] = tau_out
+        self._load_total = self._load0 + self._load
 
     # -- stepping --------------------------------------------------------------------------------------------
 
@@ -306,13 +318,15 @@ class CoupledSim:
         imp0 = act.impulse_em
         act.step_ns(self._h_ns)
         tau = N * (act.impulse_em - imp0) / h
-        load = self._load0 + self._load
+        load = self._load_total
         frc = tau - load
+        fric = None
         if self._explicit_friction:   # the friction law beyond the symmetric Coulomb part the joint carries
             f = self._fric
             sgn = np.sign(v)
             excess = effects.friction_magnitude(sgn, np.abs(N * v), f[:, 0], f[:, 1], f[:, 2], f[:, 3]) - f[:, 0]
-            frc = frc - np.where(sgn != 0.0, sgn * excess * N, 0.0)
+            fric = np.where(sgn != 0.0, -sgn * excess * N, 0.0)
+            frc = frc + fric
         d.qfrc_applied[self._dof] = frc
         mujoco.mj_step(m, d)
         dq = d.qpos[self._qadr] - q
@@ -320,9 +334,9 @@ class CoupledSim:
         self._w_load += float(load @ dq)
         # every dof (a free base too): passive (springs are potential energy) and constraint forces, the damping
         # at the new speed (MuJoCo's Euler integrates it implicitly), and the coupled joints' explicit friction
-        dq_all = d.qvel * h
-        self._w_passive += float((d.qfrc_passive - d.qfrc_spring - d.qfrc_damper + d.qfrc_constraint) @ dq_all
-                                 - (m.dof_damping * d.qvel) @ dq_all + (frc - tau + load) @ dq)
+        qvel = d.qvel
+        self._w_passive += float((d.qfrc_passive - d.qfrc_spring - d.qfrc_damper + d.qfrc_constraint
+                                  - m.dof_damping * qvel) @ qvel) * h + (float(fric @ dq) if fric is not None else 0.0)
         self._v_prev = v
         self._effort = tau
         self._t_ns += self._h_ns
