@@ -5,6 +5,13 @@ actuator and parameter with no alert on a stable actuator.
     python benchmarks/bench_fleet.py [--out /tmp/bench_fleet] [--actuators 8] [--days 30] [--workers 1,2]
                                      [--duration 20] [--rate 250] [--tracked-only] [--reuse]
 
+False-alarm rate on a STABLE fleet (no planted drift; every alert is a false alarm): one run, then the
+alerts of every prefix of the days (3, 4, ... recordings per series: the fleet re-run each day) at the
+default alpha and at alpha = 0.05 (where enough alarms are expected to check the calibration):
+
+    python benchmarks/bench_fleet.py --stable --out /tmp/bench_stable --actuators 24 --days 10 --workers 2 \
+        --tracked-only [--loop closed]
+
 The machine's load matters (the figures are wall-clock): the script prints ``os.getloadavg()``.
 """
 
@@ -49,7 +56,13 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", default="1,2")
     ap.add_argument("--tracked-only", action="store_true")
     ap.add_argument("--reuse", action="store_true", help="reuse a fleet already generated in OUT/fleet")
+    ap.add_argument("--stable", action="store_true", help="measure the false-alarm rate on a stable fleet")
+    ap.add_argument("--loop", choices=("open", "closed"), default="open")
+    ap.add_argument("--evaluate-only", action="store_true",
+                    help="--stable: re-evaluate the alerts of an existing OUT/out_stable/fleet.parquet (no run)")
     a = ap.parse_args(argv)
+    if a.stable:
+        return stable(a)
     root = a.out / "fleet"
     if a.reuse and (root / "truth.json").exists():
         truth = json.loads((root / "truth.json").read_text())
@@ -75,10 +88,10 @@ def main(argv=None) -> int:
                 return rc
             doc = json.loads((out / "alerts.json").read_text())
             if suffix:
-                for rec in doc["alerts"] + doc["tested"]:
+                for rec in doc["alerts"] + doc["series"]:
                     rec["actuator_id"] = f"{rec['actuator_id']}/{suffix}"
             alerts += doc["alerts"]
-            tested += doc["tested"]
+            tested += doc["series"]
             failures += doc["failures"]
             n += doc["summary"]["recordings"]
             secs += doc["summary"]["seconds"]
@@ -91,6 +104,55 @@ def main(argv=None) -> int:
         if res["drifts_covered"] != sorted({(x['actuator_id'], x['parameter']) for x in truth['actuators'] if x['drift']}):
             print("        (not every planted drift was covered by a run)")
     return 0 if ok else 1
+
+
+def stable(a) -> int:
+    """Generate (or reuse) a stable fleet, run it once, count alerts per stable series at every day prefix."""
+    import pyarrow.parquet as pq
+
+    from bldc_actuator.fleet import alerts as A
+
+    root = a.out / "fleet"
+    if a.reuse and (root / "truth.json").exists():
+        truth = json.loads((root / "truth.json").read_text())
+    else:
+        units = [G.Unit(u.actuator_id, u.fmt, None, u.joint_index) for u in G.default_units(a.actuators)]
+        t0 = time.perf_counter()
+        truth = G.generate(root, days=a.days, duration=a.duration, rate=a.rate, units=units, loop=a.loop)
+        print(f"generated {truth['files']} files ({a.actuators} stable actuators x {a.days} days, {a.loop} loop, "
+              f"{a.duration:g} s at {a.rate:g} Hz) in {time.perf_counter() - t0:.0f} s")
+    w = int(a.workers.split(",")[-1])
+    out = a.out / "out_stable"
+    extra = ["--tracked-only"] if a.tracked_only else []
+    rc = 0 if a.evaluate_only else cli(["fleet", str(root / "**" / "*.mcap"), str(root / "**" / "*.csv"), "--params", str(root / "params.yaml"),
+              "--out", str(out), "--workers", str(w), "--no-progress", *extra])
+    if rc != 0:
+        return rc
+    rows = pq.read_table(out / "fleet.parquet").to_pylist()
+    days = sorted({r["start_time"][:10] for r in rows if r["source"] == "tracked"})
+    print(f"{'alpha':>6} {'days':>4} {'series':>6} {'off_nominal':>11} {'drifting':>8} {'shifted':>7} "
+          f"{'any':>4} {'rate/series':>11}")
+    totals = {}
+    for alpha in (1e-3, 0.05):
+        for k in range(3, len(days) + 1):
+            sub = [r for r in rows if r["start_time"][:10] <= days[k - 1]]
+            ev = A.evaluate(sub, A.Options(alpha=alpha))
+            n = len(ev["series"])
+            c = {kind: sum(kind in s["kinds"] for s in ev["series"]) for kind in ("off_nominal", "drifting", "shifted")}
+            anyc = sum(bool(s["kinds"]) for s in ev["series"])
+            t = totals.setdefault(alpha, [0, 0, 0])
+            t[0] += n
+            t[1] += anyc
+            t[2] += c["drifting"]
+            print(f"{alpha:>6g} {k:>4} {n:>6} {c['off_nominal']:>11} {c['drifting']:>8} {c['shifted']:>7} {anyc:>4} "
+                  f"{anyc / n if n else 0:>11.4f}")
+            for s in ev["series"]:
+                if s["kinds"] and alpha == 1e-3:
+                    print(f"       {s['message']}")
+    for alpha, (n, anyc, drift) in totals.items():
+        print(f"alpha {alpha:g}: {anyc} alert(s) in {n} series-runs ({anyc / n:.4f} per series and run); drifting "
+              f"{drift} ({drift / n:.4f}, nominal alpha {alpha:g})")
+    return 0
 
 
 if __name__ == "__main__":

@@ -4,8 +4,8 @@
     .venv/bin/python benchmarks/bench_node.py [--seconds 3] [--executor single|events|both]
 
 Measures, in one process (no DDS subscriber unless stated):
-* real time (time_factor 1) at 1 kHz publish / 10 kHz physics: achieved publish rate, timer tick interval
-  p50/p99, lateness of each period's publication behind its ideal wall time p50/p99/max, CPU use
+* real time (time_factor 1) at 1 kHz publish / 10 kHz physics: achieved publish rate, lateness of each
+  period's publication behind its ideal wall time p50/p99/max (``node.scheduler.timing``), CPU use
   (process CPU time / wall; includes the DDS threads);
 * the same while recording to MCAP;
 * as fast as possible (time_factor 0), with and without recording: the maximum real-time factor and the
@@ -111,27 +111,12 @@ def run_free(context, executor_kind: str, seconds: float, time_factor: float, re
             if time.monotonic() - t0 > 20:
                 ctl.kill()
                 raise RuntimeError("controller process not discovered")
-    ticks: list[int] = []
-    pubs: list[int] = []
-    orig_tick, orig_pub = node._on_tick, node._publish_state
-
-    def tick():
-        ticks.append(time.monotonic_ns())
-        orig_tick()
-
-    def pub():
-        orig_pub()
-        pubs.append(time.monotonic_ns())
-
-    node._on_tick = tick
-    node._publish_state = pub
+    node.scheduler.timing = []     # (ideal wall time, wall time after publication) of every clocked period
     ex = make_executor(executor_kind, context)
     ex.add_node(node)
     node.start()
-    pubs.clear()
-    received0 = node.commands_received
+    received0, periods0 = node.commands_received, node.periods
     wall0, cpu0, sim0 = time.monotonic_ns(), proc_cpu_seconds(), node.t_ns
-    anchor_wall, anchor_sim = node._anchor_wall, node._anchor_sim
     deadline = time.monotonic() + seconds
     while time.monotonic() < deadline:
         ex.spin_once(timeout_sec=0.05)
@@ -150,18 +135,15 @@ def run_free(context, executor_kind: str, seconds: float, time_factor: float, re
     ex.remove_node(node)
     node.destroy_node()
     ex.shutdown()
-    out = {"wall": wall, "sim": sim, "rtf": sim / wall, "cpu": cpu / wall, "periods": len(pubs),
-           "rate": len(pubs) / wall, "messages": written, "bytes": nbytes, "slips": slips,
+    periods = node.periods - periods0
+    timing = node.scheduler.timing
+    out = {"wall": wall, "sim": sim, "rtf": sim / wall, "cpu": cpu / wall, "periods": periods,
+           "rate": periods / wall, "messages": written, "bytes": nbytes, "slips": slips,
            "commands_per_s": received / wall / max(1, joints)}
-    if 0 < time_factor < float("inf"):
-        intervals = np.diff(ticks) * 1e-6
-        period_ns = node.period_ns
-        # ideal wall time of the publication of period k (ends at sim time anchor_sim + k*period)
-        ideal = [anchor_wall + (anchor_sim + (k + 1) * period_ns - anchor_sim) / time_factor for k in range(len(pubs))]
-        late = (np.array(pubs) - np.array(ideal)) * 1e-6
-        late -= late.min() if len(late) else 0.0   # the anchor has an arbitrary half-period offset
-        out.update(tick_p50=pct(intervals, 50), tick_p99=pct(intervals, 99),
-                   late_p50=pct(late, 50), late_p99=pct(late, 99), late_max=float(late.max()) if len(late) else 0)
+    if 0 < time_factor < float("inf") and timing:
+        late = np.array([done - ideal for ideal, done in timing]) * 1e-6
+        late -= late.min()   # the anchor leads the wake-ups by a tenth of a period: relative lateness
+        out.update(late_p50=pct(late, 50), late_p99=pct(late, 99), late_max=float(late.max()))
     return out
 
 
@@ -283,8 +265,7 @@ def main() -> int:
             for label, rec in (("real time (factor 1)", None),
                                ("real time, recording MCAP", tmp / f"rt_{kind}.mcap")):
                 r = run_free(context, kind, args.seconds, 1.0, rec)
-                print(f"  {label:<28} rate {r['rate']:7.1f} Hz   tick p50/p99 {r['tick_p50']:.3f}/"
-                      f"{r['tick_p99']:.3f} ms   publish lateness p50/p99/max {r['late_p50']:.3f}/"
+                print(f"  {label:<28} rate {r['rate']:7.1f} Hz   publish lateness p50/p99/max {r['late_p50']:.3f}/"
                       f"{r['late_p99']:.3f}/{r['late_max']:.2f} ms   CPU {r['cpu'] * 100:5.1f} %   slips {r['slips']}")
             for label, rec in (("as fast as possible", None),
                                ("as fast as possible, recording", tmp / f"fast_{kind}.mcap")):

@@ -33,6 +33,13 @@ cools through R_ha during the recording: with the fleet's thermal time constant 
 Usage::
 
     python benchmarks/fleet_gen.py OUT_DIR [--actuators 8] [--days 30] [--duration 20] [--rate 250]
+                                   [--loop open|closed] [--noise 1.0] [--stable]
+
+``--loop closed``: a joint controller (PD on the output angle at the log rate, current command from the
+nominal K_t and gear) follows smooth swings with two standstill holds instead of the open-loop multi-sine
+current (:func:`run_closed_loop`); ``--noise 0``: no sensor noise (quantisation stays); ``--stable``: no
+planted drift. In Python, :class:`Unit` ``schedule`` sets exact per-day true values and ``generate(...,
+unfinalized=k)`` cuts the last k MCAP files short (a recorder that never closed them).
 
 Writes ``OUT_DIR/params.yaml`` (the nominal parameters every diagnosis starts from), ``OUT_DIR/truth.json``
 (which actuator drifts in which parameter) and the recordings.
@@ -92,6 +99,9 @@ class Unit:
     fmt: str                  #: one of FORMATS
     drift: str | None = None  #: one of DRIFT_PARAMETER or None
     joint_index: int = 0      #: column number in a wide CSV (1-based), 0 otherwise
+    #: exact true values per day, overriding spread and drift: ``{"effects.coulomb_friction": (0.010, 0.016,
+    #: ...)}`` (the last value is kept after the schedule ends)
+    schedule: dict = None
 
 
 def _stable(text: str) -> int:
@@ -117,10 +127,12 @@ def true_params(nominal: ActuatorParams, unit: Unit, day: int, days: int, rng: n
         kt *= 0.95
     warm = 12.0 + 6.0 * rng.random()
     Ta = f["thermal.ambient_temperature"]
-    return nominal.replace(**{"effects.coulomb_friction": coulomb, "thermal.housing_to_ambient_resistance": r_ha,
-                              "motor.torque_constant_q": kt, "motor.viscous_damping": visc,
-                              "thermal.initial_housing_temperature": Ta + warm,
-                              "thermal.initial_winding_temperature": Ta + warm + 2.0})
+    values = {"effects.coulomb_friction": coulomb, "thermal.housing_to_ambient_resistance": r_ha,
+              "motor.torque_constant_q": kt, "motor.viscous_damping": visc,
+              "thermal.initial_housing_temperature": Ta + warm, "thermal.initial_winding_temperature": Ta + warm + 2.0}
+    for name, per_day in (unit.schedule or {}).items():
+        values[name] = float(per_day[min(day, len(per_day) - 1)])
+    return nominal.replace(**values)
 
 
 def command(duration: float, rate: float, rng: np.random.Generator) -> Profile:
@@ -134,25 +146,73 @@ def command(duration: float, rate: float, rng: np.random.Generator) -> Profile:
     return Profile(t, i, "current", name="fleet multisine")
 
 
-def simulate(p: ActuatorParams, duration: float, rate: float, rng: np.random.Generator) -> dict[str, np.ndarray]:
-    """Run the command through the model; return signals with measurement noise and quantisation."""
-    prof = command(duration, rate, rng)
-    res = Actuator(p).run(prof)
+def reference(duration: float, rate: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Output-angle reference [rad] and its rate [rad/s] of a closed-loop day: smooth swings both ways
+    (a joint at work) with two standstill holds, random phases per day."""
+    t = np.arange(int(round(duration * rate)) + 1) / rate
+    freqs = np.array([0.11, 0.29, 0.53])
+    amps = np.array([0.9, 0.45, 0.2])
+    ph = rng.uniform(0, 2 * np.pi, len(freqs))
+    # two holds of 2 s (where a joint rests): the reference stays where it was
+    speed = np.ones_like(t)
+    for start in (0.3 * duration, 0.7 * duration):      # the reference's speed ramps to 0 and back in 0.5 s
+        speed *= np.clip(np.abs(t - (start + 1.0)) / 0.5 - 1.5, 0.0, 1.0)
+    # warp time: where speed is 0 the reference stands still
+    tw = np.concatenate([[0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * np.diff(t))])
+    theta = (amps[:, None] * np.sin(2 * np.pi * freqs[:, None] * tw[None, :] + ph[:, None])).sum(axis=0)
+    theta = theta - theta[0]
+    return theta, np.gradient(theta, t)
+
+
+def run_closed_loop(p: ActuatorParams, duration: float, rate: float, rng: np.random.Generator,
+                    kp_out: float = 20.0, kd_out: float = 1.0) -> dict[str, np.ndarray]:
+    """A joint controller at ``rate``: PD on the OUTPUT angle (gains [N*m/rad], [N*m*s/rad] at the output),
+    its torque turned into a q-current command with the NOMINAL-file K_t and gear (what the drive believes),
+    held until the next sample; every sample the model's outputs are recorded before the new command."""
+    theta_ref, omega_ref = reference(duration, rate, rng)
+    act = Actuator(p)
+    k_cmd = 1.0 / (p.motor.torque_constant_q * p.gear.gear_ratio)
+    i_lim = p.drive.current_limit
+    dt_ns = int(round(1e9 / rate))
+    rows = []
+    for k in range(len(theta_ref)):
+        o = act.outputs()
+        rows.append(o)
+        tau = kp_out * (theta_ref[k] - o["position_out"]) + kd_out * (omega_ref[k] - o["velocity_out"])
+        act.set_current_command(float(np.clip(tau * k_cmd, -i_lim, i_lim)))
+        if k + 1 < len(theta_ref):
+            act.step_ns(dt_ns)
+    keys = [k for k, v in rows[0].items() if isinstance(v, (int, float, bool, np.bool_))]
+    return {k: np.array([r[k] for r in rows], dtype=float) for k in keys}
+
+
+def simulate(p: ActuatorParams, duration: float, rate: float, rng: np.random.Generator, *, noise: float = 1.0,
+             loop: str = "open") -> dict[str, np.ndarray]:
+    """Run the command through the model; return signals with measurement noise (``noise`` x the default
+    sensor noise; 0: none) and quantisation (the 14-bit encoder, 0.01 K temperatures; kept at ``noise=0``).
+    ``loop``: ``"open"`` (the multi-sine current command of :func:`command`) or ``"closed"`` (the joint
+    controller of :func:`run_closed_loop` following :func:`reference`)."""
+    if loop == "closed":
+        res = run_closed_loop(p, duration, rate, rng)
+    elif loop == "open":
+        res = Actuator(p).run(command(duration, rate, rng))
+    else:
+        raise ValueError(f"loop: expected 'open' or 'closed', got {loop!r}")
     n = len(res["t"])
     enc = 2 * np.pi / 2 ** 14                                   # 14-bit output encoder
     out = {
         "t": res["t"],
         "i_q_ref": res["i_q_ref"],
-        "i_q": res["i_q"] + rng.normal(0, 0.03, n),
-        "i_d": res["i_d"] + rng.normal(0, 0.03, n),
-        "v_q": res["v_q"] + rng.normal(0, 0.02, n),
+        "i_q": res["i_q"] + noise * rng.normal(0, 0.03, n),
+        "i_d": res["i_d"] + noise * rng.normal(0, 0.03, n),
+        "v_q": res["v_q"] + noise * rng.normal(0, 0.02, n),
         "v_d": res["v_d"],
         "omega": res["omega"],
         "position_out": np.round(res["position_out"] / enc) * enc,
-        "velocity_out": res["velocity_out"] + rng.normal(0, 0.01, n),
+        "velocity_out": res["velocity_out"] + noise * rng.normal(0, 0.01, n),
         "effort_out": res["effort_out"],
-        "T_winding": np.round(res["T_winding"] + rng.normal(0, 0.05, n), 2),
-        "T_housing": np.round(res["T_housing"] + rng.normal(0, 0.05, n), 2),
+        "T_winding": np.round(res["T_winding"] + noise * rng.normal(0, 0.05, n), 2),
+        "T_housing": np.round(res["T_housing"] + noise * rng.normal(0, 0.05, n), 2),
         "v_limit_q": res["v_limit_q"], "v_magnitude_q": res["v_magnitude_q"],
         "torque_em": res["torque_em"], "current_limit_effective": res["current_limit_effective"],
         "joule_power": res["joule_power"], "resistance_phase": res["resistance_phase"],
@@ -255,13 +315,19 @@ def default_units(n_actuators: int) -> list[Unit]:
 
 def generate(root: str | Path, n_actuators: int = 8, days: int = 30, duration: float = 20.0, rate: float = 250.0,
              seed: int = 1, corrupt: int = 0, progress: bool = False, drift_days: float = 30.0,
-             units: list[Unit] | None = None, formats: tuple[str, ...] = FORMATS) -> dict:
+             units: list[Unit] | None = None, formats: tuple[str, ...] = FORMATS, loop: str = "open",
+             noise: float = 1.0, nominal_overrides: dict | None = None, unfinalized: int = 0) -> dict:
     """Write the fleet under ``root``; returns the truth (also written to ``root/truth.json``).
     ``corrupt`` > 0 adds that many corrupt files (truncated MCAP / garbage CSV) that a run must report;
-    ``units`` replaces :func:`default_units`; ``formats`` keeps only the units logging in those formats."""
+    ``units`` replaces :func:`default_units`; ``formats`` keeps only the units logging in those formats;
+    ``loop``/``noise``: see :func:`simulate`; ``nominal_overrides``: flat fields of the fleet's parameter file
+    (e.g. ``{"effects.coulomb_friction": 0.010}``); ``unfinalized`` > 0: that many of the last MCAP files are
+    cut back to 60 % of their size (a recorder that never closed them: readable up to the cut)."""
     root = Path(root)
     root.mkdir(parents=True, exist_ok=True)
     nominal = nominal_params()
+    if nominal_overrides:
+        nominal = nominal.replace(**nominal_overrides)
     (root / "params.yaml").write_text(dump_yaml(nominal))
     units = [u for u in (units or default_units(n_actuators)) if u.fmt in formats]
     files: list[str] = []
@@ -271,7 +337,8 @@ def generate(root: str | Path, n_actuators: int = 8, days: int = 30, duration: f
         wide = []
         for u in units:
             rng = np.random.default_rng([seed, day, _stable(u.actuator_id)])
-            sig = simulate(true_params(nominal, u, day, days, rng, drift_days), duration, rate, rng)
+            sig = simulate(true_params(nominal, u, day, days, rng, drift_days), duration, rate, rng, noise=noise,
+                           loop=loop)
             if u.fmt == "mcap":
                 f = root / u.actuator_id / f"{stamp}.mcap"
                 write_mcap(f, sig, nominal, u.actuator_id, start)
@@ -289,6 +356,11 @@ def generate(root: str | Path, n_actuators: int = 8, days: int = 30, duration: f
             files.append(str(f))
         if progress:
             print(f"day {day + 1}/{days}: {len(files)} files", file=sys.stderr, flush=True)
+    cut = []
+    for f in [f for f in files if f.endswith(".mcap")][::-1][:unfinalized]:
+        data = Path(f).read_bytes()
+        Path(f).write_bytes(data[: int(0.6 * len(data))])
+        cut.append(f)
     for k in range(corrupt):
         if k % 2 == 0:
             good = next((Path(f) for f in files if f.endswith(".mcap")), None)
@@ -304,7 +376,8 @@ def generate(root: str | Path, n_actuators: int = 8, days: int = 30, duration: f
              "drift_days": drift_days,
              "actuators": [{"actuator_id": u.actuator_id, "format": u.fmt, "drift": u.drift,
                             "parameter": DRIFT_PARAMETER.get(u.drift) if u.drift else None} for u in units],
-             "files": len(files)}
+             "files": len(files), "unfinalized": cut, "loop": loop, "noise": noise,
+             "schedules": {u.actuator_id: u.schedule for u in units if u.schedule}}
     (root / "truth.json").write_text(json.dumps(truth, indent=1))
     return truth
 
@@ -320,9 +393,15 @@ def main(argv=None) -> int:
     ap.add_argument("--drift-days", type=float, default=30.0, help="days over which the drifts reach full size")
     ap.add_argument("--formats", default=",".join(FORMATS), help="comma-separated subset of " + ", ".join(FORMATS))
     ap.add_argument("--corrupt", type=int, default=0, help="add this many corrupt files")
+    ap.add_argument("--loop", choices=("open", "closed"), default="open",
+                    help="open: multi-sine current command; closed: a PD joint controller following swings")
+    ap.add_argument("--noise", type=float, default=1.0, help="sensor noise scale (0: none; quantisation stays)")
+    ap.add_argument("--stable", action="store_true", help="no planted drift: every actuator stable")
     a = ap.parse_args(argv)
+    units = [Unit(u.actuator_id, u.fmt, None, u.joint_index) for u in default_units(a.actuators)] if a.stable else None
     truth = generate(a.out, a.actuators, a.days, a.duration, a.rate, a.seed, a.corrupt, progress=True,
-                     drift_days=a.drift_days, formats=tuple(a.formats.split(",")))
+                     drift_days=a.drift_days, formats=tuple(a.formats.split(",")), units=units, loop=a.loop,
+                     noise=a.noise)
     print(f"wrote {truth['files']} files under {a.out} ({a.actuators} actuators x {a.days} days)")
     return 0
 

@@ -46,7 +46,7 @@ _COEF_SCALARS = (
     "T_c", "Kp", "Ki", "decouple", "T_derate", "T_trip", "T_amb", "R_wh", "R_ha", "C_w", "C_h",
     "tau_c", "tau_asym", "tau_s", "omega_s", "cog_order", "load0", "load_g", "load_phi", "load_k", "load_k0",
     "has_alpha", "has_beta", "has_stribeck", "has_friction", "has_position_load", "k_sat",
-    "fe_h", "fe_e", "sens_off_a", "sens_off_b", "sens_gain_a", "sens_gain_b", "has_sensor_error", "v_dt",
+    "fe_h", "fe_e", "sens_off_a", "sens_off_b", "sens_gain_a", "sens_gain_b", "has_sensor_error", "v_dt", "dt_delta",
     "v_lim_mode", "I_fw",
 )
 COEF_DTYPE = np.dtype(
@@ -115,7 +115,7 @@ _derate_scale = jit(effects.derate_scale)
 _saturation_factor = jit(effects.saturation_factor)
 _iron_loss_power = jit(effects.iron_loss_power)
 _phase_current_measurement = jit(effects.phase_current_measurement)
-_dead_time_leg_error = jit(effects.dead_time_leg_error)
+_dead_time_winding_error = jit(effects.dead_time_winding_error)
 _dq_to_abc = jit(frames.dq_to_abc)
 _abc_to_dq = jit(frames.abc_to_dq)
 
@@ -168,12 +168,23 @@ def measured_current_dq(i_d, i_q, theta_e, off_a, off_b, gain_a, gain_b):
 
 
 @jit
-def dead_time_error_dq(i, theta_e, v_dt):
-    """d-q voltage error [V] of the inverter's dead time for winding current ``i`` (complex, wye: line =
-    phase currents) at the electrical angle ``theta_e``: each leg short by ``v_dt`` against its current."""
+def dead_time_error_dq(i, di, theta_e, v_dt, delta, h_over_L):
+    """d-q voltage error [V] the inverter's dead time puts on the windings over an interval, for winding current
+    ``i`` at its start (complex, power-invariant d-q [A]) and the change ``di`` [A] the other voltages would make
+    over it, at the electrical angle ``theta_e``: each leg short by ``v_dt`` against its line current, reaching
+    the windings as :func:`effects.dead_time_winding_error` says (``delta`` non-zero for a delta winding: line
+    currents are winding-current differences, winding voltages leg differences).
+
+    ``h_over_L`` = interval / q inductance [s/H] (0: the instantaneous sign). One leg's error moves its own line
+    current by ``(2/3) k h e / L`` (k = 1 wye, 3 delta: a delta line current is fed by two windings, each seeing
+    two legs), which decides whether the current crosses zero within the interval and is clamped there. Taking
+    the sign at the interval's start instead made the current chatter by several amperes tick to tick on a
+    low-inductance delta motor (the error pushed it through zero and back)."""
     a, b, c_ = _dq_to_abc(i.real, i.imag, theta_e)
-    e_d, e_q = _abc_to_dq(_dead_time_leg_error(a, v_dt), _dead_time_leg_error(b, v_dt),
-                          _dead_time_leg_error(c_, v_dt), theta_e)
+    da, db, dc = _dq_to_abc(di.real, di.imag, theta_e)
+    gain = (2.0 / 3.0) * (3.0 if delta else 1.0) * h_over_L
+    w_a, w_b, w_c = _dead_time_winding_error(a, b, c_, da, db, dc, v_dt, delta, gain)
+    e_d, e_q = _abc_to_dq(w_a, w_b, w_c, theta_e)
     return e_d + 1j * e_q
 
 
@@ -295,7 +306,8 @@ def advance(c, s, h_ns):
     h = h_ns * 1e-9
     i0, w0, th0, v = s.i, s.omega, s.theta, s.v
     if c.v_dt != 0.0:   # the inverter's dead time: what reaches the winding, from the currents at the start
-        v = v + dead_time_error_dq(i0, c.pole_pairs * th0, c.v_dt)
+        di = (h / c.L) * (v - (c.R_ref + 1j * c.pole_pairs * w0 * c.L) * i0 - 1j * c.K_ref * w0)  # Euler predictor
+        v = v + dead_time_error_dq(i0, di, c.pole_pairs * th0, c.v_dt, c.dt_delta, h / c.L)
     R = _resistance_at(c.R_ref, s.T_w, c.T_ref, c.alpha, True) if c.has_alpha != 0.0 else c.R_ref
     K = c.K_ref * _flux_factor(s.T_h, c.T_ref, c.beta, True) if c.has_beta != 0.0 else c.K_ref  # magnet at T_h
     if c.k_sat != 0.0:   # cross-saturation by the q current at the interval start: torque and back-EMF alike

@@ -1,10 +1,16 @@
-"""ROS 2 node ``actuator_node``: the virtual BLDC actuator (:class:`bldc_actuator.model.Actuator`) on topics.
+"""ROS 2 node ``actuator_node``: the virtual BLDC actuators of a plant (:mod:`bldc_actuator.plant`) on topics.
 
-Inputs (commands hold until replaced)
+This module is the ROS wiring (parameters, topics, messages, timer, recording) around the ROS-free
+:class:`bldc_actuator.scheduler.Scheduler`, which steps the plant, keeps lock-step, the watchdog, the command
+checks and the diagnostics levels.
+
+Inputs (commands hold until replaced; with ``joints`` given the per-joint topics are ``~/<joint>/...``)
     ``~/current_command``  std_msgs/Float64            q-axis current [A]
     ``~/torque_command``   std_msgs/Float64            output torque [N*m]
-    ``~/commands``         std_msgs/Float64MultiArray  ros2_control ForwardCommandController: one element,
-                                                       meaning set by ``node.commands_interface``
+    ``~/commands``         std_msgs/Float64MultiArray  ros2_control ForwardCommandController: one element per
+                                                       joint, meaning set by ``node.commands_interface``
+    ``node.joint_commands_topic`` sensor_msgs/JointState  effort [N*m] by joint name (ros2_control's
+                                                       topic-based hardware interface)
     ``~/load_torque``      std_msgs/Float64            extra external load at the output [N*m]
     ``~/reset_fault``      std_msgs/Empty              clears a latched over-temperature trip
 Outputs (stamped with SIMULATION time, at ``node.publish_rate`` per simulated second)
@@ -12,13 +18,16 @@ Outputs (stamped with SIMULATION time, at ``node.publish_rate`` per simulated se
     ``~/phase_currents``     std_msgs/Float64MultiArray i_phase_a, i_phase_b, i_phase_c [A] (winding currents)
     ``~/q_axis_state``       std_msgs/Float64MultiArray :data:`Q_AXIS_FIELDS` (labelled layout)
     ``~/winding_temperature``, ``~/housing_temperature``  sensor_msgs/Temperature [degC]
-    ``/diagnostics``         diagnostic_msgs/DiagnosticArray at ``node.diagnostics_rate`` (simulated)
+    (the four detail topics at ``node.detail_rate``, on demand: only while something subscribes to them,
+    or always while recording)
+    ``/diagnostics``         diagnostic_msgs/DiagnosticArray at ``node.diagnostics_rate`` (simulated); every
+                             change of a joint's level is also logged on the console
     ``/clock``               rosgraph_msgs/Clock when ``node.publish_clock``
 
 Time: a timer on the STEADY clock (never the node clock: with ``use_sim_time`` and our own ``/clock`` that
-would deadlock) advances the model by ``time_factor`` x the elapsed wall time, in whole publish periods;
-``time_factor`` 0 or inf runs as fast as possible (batches of periods between executor spins);
-``node.lock_step`` advances exactly one period per received command instead.
+would deadlock) wakes once per period of wall time and the scheduler advances the plant by ``time_factor`` x
+the elapsed wall time, in whole publish periods; ``time_factor`` 0 or inf runs as fast as possible (batches
+of periods between executor spins); ``node.lock_step`` advances exactly one period per received command.
 
 Parameters: see :mod:`bldc_actuator.node_params`. ``actuator_node --help`` lists them.
 """
@@ -31,7 +40,7 @@ import operator
 import sys
 import threading
 import time
-from collections import deque
+from array import array
 from typing import Any
 
 import rclpy
@@ -50,8 +59,10 @@ from sensor_msgs.msg import JointState, Temperature
 from std_msgs.msg import Empty, Float64, Float64MultiArray, MultiArrayDimension
 
 from . import node_params as NP
-from .model import COMPILED, Actuator, warm_up
+from .model import COMPILED, warm_up
 from .params import SPECS, ParameterError, from_flat
+from .plant import ActuatorPlant
+from .scheduler import ABSURD_FACTOR, DERATE_ERROR_FRACTION, Health, JointCommand, Scheduler, SchedulerConfig  # noqa: F401
 
 NODE_NAME = "bldc_actuator"
 
@@ -63,15 +74,10 @@ Q_AXIS_FIELDS = ("i_q", "i_d", "i_q_ref", "v_q", "v_d", "v_limit_q", "bus_voltag
 PHASE_FIELDS = ("i_phase_a", "i_phase_b", "i_phase_c")
 _Q_GET, _PHASE_GET = operator.itemgetter(*Q_AXIS_FIELDS), operator.itemgetter(*PHASE_FIELDS)
 
-#: a command beyond this multiple of the drive's current limit (in current) is rejected as absurd;
-#: commands between 1x and this are accepted and limited by the drive like a real one would
-ABSURD_FACTOR = 10.0
-#: diagnostics level ERROR once thermal derating has cut the current limit by more than this fraction
-DERATE_ERROR_FRACTION = 0.5
-#: longest wall time one timer callback may spend stepping before yielding to the executor [s]
-MAX_BATCH_WALL = 0.02
 #: subscription queue depth of the command topics
 COMMAND_QUEUE_DEPTH = 100
+#: wall time between checks of which detail topics have subscribers [ns]
+DETAIL_REFRESH_NS = 100_000_000
 
 OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
 
@@ -90,71 +96,55 @@ def _stamp(t_ns: int) -> TimeMsg:
     return TimeMsg(sec=t_ns // 1_000_000_000, nanosec=t_ns % 1_000_000_000)
 
 
-class _Joint:
-    """One simulated actuator of the node: its model, command state, topics and diagnostics window."""
+class JointTopics:
+    """One joint's ROS entities: publishers, subscriptions and the reusable detail messages (their header
+    stamp is the node's one stamp, updated in place every period)."""
 
-    def __init__(self, name: str, params, index: int):
-        self.name, self.index, self.params = name, index, params
-        self.actuator = Actuator(params)
-        self.command_kind = "current"            # "current" [A] | "torque" [N*m]
-        self.command_value = 0.0
-        self.last_command_ns: int | None = None  # watchdog armed by the first command
-        self.watchdog_active = False
-        self.commands_received = 0
-        self.commands_rejected = 0
-        self.last_rejection = ""
-        self.load_torque_extra = 0.0
-        self.win_saturated = 0
-        self.win_rejected = 0
-        self.last_outputs: dict | None = None
-        # ROS entities (set by the node)
+    def __init__(self, name: str, stamp: TimeMsg):
+        self.name = name
         self.pub_phase = self.pub_q = self.pub_tw = self.pub_th = None
         self.sub_current = self.sub_torque = self.sub_load = self.sub_reset = None
         self.m_phase = labelled_layout(Float64MultiArray(), PHASE_FIELDS)
         self.m_q = labelled_layout(Float64MultiArray(), Q_AXIS_FIELDS)
         self.m_tw, self.m_th = Temperature(), Temperature()
-        self.m_tw.header.frame_id = self.m_th.header.frame_id = name
+        for m in (self.m_tw, self.m_th):
+            m.header.frame_id = name
+            m.header.stamp = stamp
 
-    def absurd_limit(self, kind: str) -> float:
-        """|command| beyond this is rejected as absurd (A, or N*m at the output)."""
-        i_max = ABSURD_FACTOR * self.params.drive.current_limit
-        if kind == "current":
-            return i_max
-        return i_max * self.params.motor.torque_constant_q * self.params.gear.gear_ratio
+    def detail(self):
+        """``(publisher, fill(outputs) -> message)`` of each detail topic."""
+        m_phase, m_q, m_tw, m_th = self.m_phase, self.m_q, self.m_tw, self.m_th
 
+        def phase(o):
+            m_phase.data = array("d", _PHASE_GET(o))
+            return m_phase
 
-def _joint_attr(name: str):
-    """Single-joint compatibility: ``node.<name>`` is joint 0's attribute."""
-    return property(lambda self: getattr(self.joints[0], name),
-                    lambda self, value: setattr(self.joints[0], name, value))
+        def q(o):
+            m_q.data = array("d", _Q_GET(o))
+            return m_q
+
+        def tw(o):
+            m_tw.temperature = float(o["T_winding"])
+            return m_tw
+
+        def th(o):
+            m_th.temperature = float(o["T_housing"])
+            return m_th
+
+        return [(self.pub_phase, phase), (self.pub_q, q), (self.pub_tw, tw), (self.pub_th, th)]
 
 
 class ActuatorNode(Node):
-    """The actuator node: one or several joints (``joints`` parameter), each a simulated actuator.
-    Construct after ``rclpy.init``; add to an executor; ``done`` completes when ``node.max_sim_time`` is
-    reached. Call :meth:`close` (or ``destroy_node``) to finish a recording.
+    """The actuator node: one or several joints (``joints`` parameter), each a simulated actuator of
+    :attr:`plant` (:class:`~bldc_actuator.plant.ActuatorPlant`), stepped by :attr:`scheduler`. Construct after
+    ``rclpy.init``; add to an executor; ``done`` completes when ``node.max_sim_time`` is reached. Call
+    :meth:`close` (or ``destroy_node``) to finish a recording.
 
     One joint (default): the topics of the module docstring. Several joints: ``joint_states`` holds all of
     them, ``~/commands`` takes one value per joint in ``joints`` order, and every per-joint topic moves under
-    ``~/<joint>/`` (``~/knee/torque_command``, ``~/knee/q_axis_state``, ...)."""
-
-    actuator = _joint_attr("actuator")
-    params = _joint_attr("params")
-    command_kind = _joint_attr("command_kind")
-    command_value = _joint_attr("command_value")
-    watchdog_active = _joint_attr("watchdog_active")
-    load_torque_extra = _joint_attr("load_torque_extra")
-    _last_command_ns = _joint_attr("last_command_ns")
-    pub_phase = _joint_attr("pub_phase")
-    pub_q = _joint_attr("pub_q")
-    pub_tw = _joint_attr("pub_tw")
-    pub_th = _joint_attr("pub_th")
-    sub_current = _joint_attr("sub_current")
-    sub_torque = _joint_attr("sub_torque")
-    sub_load = _joint_attr("sub_load")
-    sub_reset = _joint_attr("sub_reset")
-    _m_phase = _joint_attr("m_phase")
-    _m_q = _joint_attr("m_q")
+    ``~/<joint>/`` (``~/knee/torque_command``, ``~/knee/q_axis_state``, ...). Per joint: :attr:`joints`
+    (command state and counters, :class:`~bldc_actuator.scheduler.JointCommand`), :attr:`topics` (its ROS
+    entities), ``plant.outputs(name)`` / ``plant.params(name)`` (its physics)."""
 
     def __init__(self, node_name: str = NODE_NAME, *, namespace: str | None = None, context=None,
                  cli_args: list[str] | None = None, parameter_overrides: list[Parameter] | None = None,
@@ -176,33 +166,22 @@ class ActuatorNode(Node):
         # compile (or load from numba's cache) the physics kernel now, before simulation time is tied to the
         # wall clock: a first step that compiles would otherwise be a slip of seconds
         self.kernel_warm_up_s = warm_up()
-        self.joints = [_Joint(name, p, k) for k, (name, p) in enumerate(joint_params.items())]
         self.multi = explicit   # joints given: per-joint topics under ~/<joint>/
-        self.joint_name = self.joints[0].name
-        self.period_ns = int(round(1e9 / nv["node.publish_rate"]))
-        self.diag_period_ns = max(self.period_ns, int(round(1e9 / nv["node.diagnostics_rate"])))
-        self.detail_period_ns = max(self.period_ns, int(round(1e9 / nv["node.detail_rate"]))) \
-            if nv["node.detail_rate"] > 0 else self.period_ns
-        self.lock_step = nv["node.lock_step"]
-        self.max_sim_ns = int(round(nv["node.max_sim_time"] * 1e9))
-        self._watchdog_ns = int(round(nv["node.watchdog_timeout"] * 1e9))
-        self._time_factor = nv["node.time_factor"]
-        self._commands_interface = nv["node.commands_interface"]
-
-        self.commands_received = 0
-        self.commands_rejected = 0
-        self.last_rejection = ""
-        self.rejections: deque[str] = deque(maxlen=100)   # recent rejection reasons, newest last
-        # diagnostics window
-        self._next_diag_ns = 0
-        self._next_detail_ns = 0
-        self._win_periods = 0
-        self._win_wall0 = time.monotonic_ns()
-        self._win_sim0 = 0
-        self.real_time_factor = float("nan")
-        self.slips = 0
-        self._win_slips = 0
-        self.periods = 0
+        self.plant = ActuatorPlant(joint_params)
+        period_ns = int(round(1e9 / nv["node.publish_rate"]))
+        config = SchedulerConfig(
+            period_ns=period_ns, time_factor=nv["node.time_factor"], lock_step=nv["node.lock_step"],
+            watchdog_ns=int(round(nv["node.watchdog_timeout"] * 1e9)),
+            max_sim_ns=int(round(nv["node.max_sim_time"] * 1e9)),
+            diag_period_ns=max(period_ns, int(round(1e9 / nv["node.diagnostics_rate"]))),
+            detail_period_ns=max(period_ns, int(round(1e9 / nv["node.detail_rate"])))
+            if nv["node.detail_rate"] > 0 else period_ns,
+            commands_interface=nv["node.commands_interface"], name_joints=self.multi)
+        self.scheduler = Scheduler(self.plant, config, log=self.get_logger(), on_period=self._on_period,
+                                   on_finished=self._on_finished)
+        self.joints: list[JointCommand] = self.scheduler.joints
+        self._stamp_now = TimeMsg()   # one Time message, updated in place: every header of a period shares it
+        self.topics = [JointTopics(j.name, self._stamp_now) for j in self.joints]
 
         qos = QoSProfile(depth=10)
         self._qos = qos
@@ -211,28 +190,41 @@ class ActuatorNode(Node):
         self.pub_clock = self.create_publisher(ClockMsg, "/clock", qos) if nv["node.publish_clock"] else None
         # deep command queues: in lock-step mode every command counts (one period each), even in bursts
         cq = QoSProfile(depth=COMMAND_QUEUE_DEPTH)
-        for j in self.joints:
+        for j, jt in zip(self.joints, self.topics):
             pre = f"~/{j.name}/" if self.multi else "~/"
-            j.pub_phase = self.create_publisher(Float64MultiArray, pre + "phase_currents", qos)
-            j.pub_q = self.create_publisher(Float64MultiArray, pre + "q_axis_state", qos)
-            j.pub_tw = self.create_publisher(Temperature, pre + "winding_temperature", qos)
-            j.pub_th = self.create_publisher(Temperature, pre + "housing_temperature", qos)
-            j.sub_current = self.create_subscription(
-                Float64, pre + "current_command", lambda m, j=j: self._on_scalar(j, j.sub_current, "current", m), cq)
-            j.sub_torque = self.create_subscription(
-                Float64, pre + "torque_command", lambda m, j=j: self._on_scalar(j, j.sub_torque, "torque", m), cq)
-            j.sub_load = self.create_subscription(Float64, pre + "load_torque", lambda m, j=j: self._on_load(j, m), cq)
-            j.sub_reset = self.create_subscription(Empty, pre + "reset_fault", lambda m, j=j: self._on_reset(j, m), qos)
+            jt.pub_phase = self.create_publisher(Float64MultiArray, pre + "phase_currents", qos)
+            jt.pub_q = self.create_publisher(Float64MultiArray, pre + "q_axis_state", qos)
+            jt.pub_tw = self.create_publisher(Temperature, pre + "winding_temperature", qos)
+            jt.pub_th = self.create_publisher(Temperature, pre + "housing_temperature", qos)
+            jt.sub_current = self.create_subscription(
+                Float64, pre + "current_command", lambda m, j=j, jt=jt: self._on_scalar(j, jt.sub_current,
+                                                                                        "current", m), cq)
+            jt.sub_torque = self.create_subscription(
+                Float64, pre + "torque_command", lambda m, j=j, jt=jt: self._on_scalar(j, jt.sub_torque,
+                                                                                       "torque", m), cq)
+            jt.sub_load = self.create_subscription(Float64, pre + "load_torque",
+                                                   lambda m, j=j, jt=jt: self._on_load(j, jt, m), cq)
+            jt.sub_reset = self.create_subscription(Empty, pre + "reset_fault",
+                                                    lambda m, j=j, jt=jt: self._on_reset(j, jt, m), qos)
         self.sub_commands = self.create_subscription(Float64MultiArray, "~/commands", self._on_commands, cq)
         topic = nv["node.joint_commands_topic"]
         self.sub_joint_commands = self.create_subscription(JointState, topic, self._on_joint_commands, cq) \
             if topic else None
+        # resolved names, looked up once (a topic_name property call per message costs)
+        self._commands_topic = self.sub_commands.topic_name
+        self._joint_commands_topic = self.sub_joint_commands.topic_name if topic else ""
 
-        # reusable messages (rclpy serialises at publish; reuse is safe)
-        self._m_joint = JointState(name=[j.name for j in self.joints])
-        self._m_joint.header.frame_id = self.joint_name if not self.multi else ""
-        self._m_clock = ClockMsg()
-        self._stamp_now = TimeMsg()
+        # reusable messages (rclpy serialises at publish; reuse is safe): the JointState shares the
+        # scheduler's position/velocity/effort arrays and the period stamp, so a period changes no field
+        m = self._m_joint = JointState(name=[j.name for j in self.joints])
+        m.header.frame_id = self.joints[0].name if not self.multi else ""
+        m.header.stamp = self._stamp_now
+        m.position, m.velocity, m.effort = self.scheduler.position, self.scheduler.velocity, self.scheduler.effort
+        self.scheduler.share_joint_state(m.position, m.velocity, m.effort)   # (the setters copied them)
+        self._m_clock = ClockMsg(clock=self._stamp_now)
+        self._detail_all = [(k, pub, fill) for k, jt in enumerate(self.topics) for pub, fill in jt.detail()]
+        self._detail_live: list = []
+        self._next_detail_refresh = 0
 
         record = nv["node.record"]
         if record:
@@ -247,14 +239,14 @@ class ActuatorNode(Node):
     def start(self) -> None:
         """Publish the initial state and start stepping (a steady-clock timer unless lock-step)."""
         with self._lock:
-            self._publish_state()
-            if self._timer is None and not self.lock_step:
-                self._anchor()
-                # the timer wakes twice per publish period: a period becomes due at most half a period
-                # before it is published, whatever the timer's phase (publish lateness p99 at 1 kHz: see
-                # benchmarks/bench_node.py); a wake-up with nothing due costs a few microseconds
-                self._timer = self.create_timer(max(0.5 * self.period_ns * 1e-9, 5e-4), self._on_tick,
-                                                clock=self._steady)
+            self._on_period(*self.scheduler.first_period())
+            if self._timer is None and not self.scheduler.config.lock_step:
+                self._start_timer()
+
+    def _start_timer(self) -> None:
+        # created right after the anchor: the wake-ups fall a tenth of a period after each period became due
+        self.scheduler.start()
+        self._timer = self.create_timer(self.scheduler.wake_period_ns * 1e-9, self._on_tick, clock=self._steady)
 
     def close(self) -> None:
         """Stop stepping and finalise the recording (idempotent)."""
@@ -282,10 +274,17 @@ class ActuatorNode(Node):
         finally:
             return super().destroy_node()
 
-    @property
-    def t_ns(self) -> int:
-        """Simulation time [ns]."""
-        return self.joints[0].actuator.t_ns
+    # node-level views of the scheduler (one joint or many)
+    t_ns = property(lambda self: self.scheduler.t_ns, doc="simulation time [ns]")
+    periods = property(lambda self: self.scheduler.periods, doc="periods advanced")
+    slips = property(lambda self: self.scheduler.slips, doc="wake-ups that dropped a debt of wall time")
+    period_ns = property(lambda self: self.scheduler.config.period_ns, doc="publish period [ns] (simulation)")
+    lock_step = property(lambda self: self.scheduler.config.lock_step)
+    commands_received = property(lambda self: self.scheduler.commands_received)
+    commands_rejected = property(lambda self: self.scheduler.commands_rejected)
+    last_rejection = property(lambda self: self.scheduler.last_rejection)
+    rejections = property(lambda self: self.scheduler.rejections, doc="recent rejection reasons, newest last")
+    real_time_factor = property(lambda self: self.scheduler.real_time_factor)
 
     @property
     def finished(self) -> bool:
@@ -293,115 +292,53 @@ class ActuatorNode(Node):
 
     # ------------------------------------------------------------------------------------ stepping
 
-    def _anchor(self) -> None:
-        """Tie simulation time to the steady clock now (half a period ahead, so ticks land mid-period)."""
-        f = self._time_factor
-        self._anchor_sim = self.t_ns
-        self._anchor_wall = time.monotonic_ns() - (int(self.period_ns / (2 * f)) if 0 < f < math.inf else 0)
-
-    @property
-    def as_fast_as_possible(self) -> bool:
-        return self._time_factor == 0.0 or math.isinf(self._time_factor)
-
     def _on_tick(self) -> None:
         with self._lock:
-            if self.finished or not self.context.ok():   # shutting down (Ctrl-C): publishing would fail
+            if self.scheduler.finished or not self.context.ok():   # shutting down (Ctrl-C): publishing would fail
                 return
             try:
-                self._tick()
+                self.scheduler.tick()
             except Exception:
                 if self.context.ok():
                     raise
                 # the context was shut down (signal) in the middle of the batch: a normal stop
 
-    def _tick(self) -> None:
-        now = time.monotonic_ns()
-        if self.as_fast_as_possible:
-            deadline = time.perf_counter() + MAX_BATCH_WALL
-            while not self.finished:
-                self._advance_period()
-                if time.perf_counter() >= deadline:
-                    break
-            return
-        target = self._anchor_sim + int((now - self._anchor_wall) * self._time_factor)
-        n = (target - self.t_ns) // self.period_ns
-        limit = max(1, int(MAX_BATCH_WALL * self._time_factor * 1e9 / self.period_ns))
-        if n > limit:  # cannot keep up: drop the debt instead of bursting later
-            self.slips += 1
-            self._win_slips += 1
-            self._anchor_sim = self.t_ns + limit * self.period_ns
-            self._anchor_wall = now
-            n = limit
-        for _ in range(n):
-            self._advance_period()
-            if self.finished:
-                break
-
     def advance(self, periods: int = 1) -> None:
         """Advance ``periods`` publish periods now (public for tests, benchmarks and embedding)."""
         with self._lock:
-            for _ in range(periods):
-                if self.finished:
-                    break
-                self._advance_period()
+            self.scheduler.advance(periods)
 
-    def _advance_period(self) -> None:
-        t = self.t_ns
-        step = self.period_ns
-        if self.max_sim_ns:
-            step = min(step, self.max_sim_ns - t)
-        for j in self.joints:
-            if (self._watchdog_ns > 0 and j.last_command_ns is not None and not j.watchdog_active
-                    and t - j.last_command_ns >= self._watchdog_ns):
-                j.watchdog_active = True
-                j.actuator.set_current_command(0.0)
-                self.get_logger().warning(
-                    f"command watchdog{'' if not self.multi else ' (' + j.name + ')'}: no command for "
-                    f"{self._watchdog_ns * 1e-9:g} s of simulation time; current command set to zero until "
-                    "the next command")
-            if step > 0:
-                j.actuator.step_ns(step)
-        self.periods += 1
-        self._publish_state()
-        if self.max_sim_ns and self.t_ns >= self.max_sim_ns and not self.done.done():
-            self.get_logger().info(f"node.max_sim_time reached ({self.t_ns * 1e-9:g} s)")
-            self.done.set_result(self.t_ns)
+    def _on_finished(self, t_ns: int) -> None:
+        if not self.done.done():
+            self.done.set_result(t_ns)
 
     # ------------------------------------------------------------------------------------ publishing
 
-    def _publish_state(self) -> None:
-        t_ns = self.t_ns
-        stamp = self._stamp_now          # one Time message, updated in place (all of this period's headers)
+    def _on_period(self, t_ns: int, outs: list[dict] | None, detail: bool, diag: bool) -> None:
+        stamp = self._stamp_now
         stamp.sec, stamp.nanosec = divmod(t_ns, 1_000_000_000)
-        outs = [j.actuator.outputs() for j in self.joints]
-        m = self._m_joint
-        m.header.stamp = stamp
-        m.position = [o["position_out"] for o in outs]      # Python floats (outputs() of one actuator)
-        m.velocity = [o["velocity_out"] for o in outs]
-        m.effort = [o["effort_out"] for o in outs]
+        publish = self._publish
         if self.pub_clock is not None:
-            self._m_clock.clock = stamp
-            self._publish(self.pub_clock, self._m_clock, t_ns)
-        self._publish(self.pub_joint, m, t_ns)
-        detail = t_ns >= self._next_detail_ns
+            publish(self.pub_clock, self._m_clock, t_ns)
+        publish(self.pub_joint, self._m_joint, t_ns)
         if detail:
-            self._next_detail_ns = t_ns - t_ns % self.detail_period_ns + self.detail_period_ns
-        for j, o in zip(self.joints, outs):
-            j.last_outputs = o
-            j.win_saturated += bool(o["voltage_saturated"])
-            if detail:
-                j.m_phase.data = list(map(float, _PHASE_GET(o)))
-                j.m_q.data = list(map(float, _Q_GET(o)))
-                j.m_tw.header.stamp = j.m_th.header.stamp = stamp
-                j.m_tw.temperature = float(o["T_winding"])
-                j.m_th.temperature = float(o["T_housing"])
-                for pub, msg in ((j.pub_phase, j.m_phase), (j.pub_q, j.m_q), (j.pub_tw, j.m_tw),
-                                 (j.pub_th, j.m_th)):
-                    self._publish(pub, msg, t_ns)
-        self._win_periods += 1
-        if t_ns >= self._next_diag_ns:
+            now = time.monotonic_ns()
+            if now >= self._next_detail_refresh:
+                self._refresh_detail(now)
+            if self._detail_live:
+                if outs is None:   # (a subscriber appeared this period)
+                    outs = self.plant.all_outputs()
+                for k, pub, fill in self._detail_live:
+                    publish(pub, fill(outs[k]), t_ns)
+        if diag:
             self._publish_diagnostics(outs, t_ns)
-            self._next_diag_ns = t_ns - t_ns % self.diag_period_ns + self.diag_period_ns
+
+    def _refresh_detail(self, now: int) -> None:
+        """The detail topics to publish: all while recording, else those with a subscriber (on demand)."""
+        everything = self.recorder is not None
+        self._detail_live = [d for d in self._detail_all if everything or d[1].get_subscription_count() > 0]
+        self.scheduler.detail_wanted = bool(self._detail_live)
+        self._next_detail_refresh = now + DETAIL_REFRESH_NS
 
     def _publish(self, pub, msg, t_ns: int) -> None:
         """Publish; when recording, serialise once and hand the same CDR bytes to DDS and the recorder."""
@@ -420,87 +357,20 @@ class ActuatorNode(Node):
         except Exception as exc:  # noqa: BLE001 - a recording fault never stops the actuator
             self._recording_failed(exc)
 
-    def diagnostic_status(self, o: dict | None = None, joint: int = 0) -> DiagnosticStatus:
-        """The current diagnostics entry of one joint (level, message, key values); also resets the window."""
-        status = self._joint_status(self.joints[joint], o)
-        self._reset_window()
-        return status
-
-    def _reset_window(self) -> None:
-        self._win_periods = self._win_slips = 0
-        for j in self.joints:
-            j.win_saturated = j.win_rejected = 0
-        self._win_wall0, self._win_sim0 = time.monotonic_ns(), self.t_ns
-
-    def _joint_status(self, j: _Joint, o: dict | None) -> DiagnosticStatus:
-        act, p = j.actuator, j.params
-        o = act.outputs() if o is None else o
-        t_ns = act.t_ns
-        wall = time.monotonic_ns()
-        if wall > self._win_wall0 and t_ns > self._win_sim0:
-            self.real_time_factor = (t_ns - self._win_sim0) / (wall - self._win_wall0)
-        sat = j.win_saturated / self._win_periods if self._win_periods else 0.0
-        level, why = OK, []
-        lim_eff, lim = float(o["current_limit_effective"]), p.drive.current_limit
-        T_w = float(o["T_winding"])
-        reset_topic = f"~/{j.name}/reset_fault" if self.multi else "~/reset_fault"
-        if o["tripped"]:
-            level = ERROR
-            why.append(f"over-temperature TRIP (winding {T_w:.1f} degC, trip at {p.drive.trip_temperature:g}); "
-                       f"latched: publish std_msgs/Empty on {reset_topic}")
-        elif lim_eff < (1.0 - DERATE_ERROR_FRACTION) * lim:
-            level = ERROR
-            why.append(f"thermal derating beyond {DERATE_ERROR_FRACTION:.0%}: current limit {lim_eff:.2f} of "
-                       f"{lim:g} A (winding {T_w:.1f} degC)")
-        elif T_w > p.drive.derate_temperature:
-            level = WARN
-            why.append(f"thermal derating: winding {T_w:.1f} degC > {p.drive.derate_temperature:g}; "
-                       f"current limit {lim_eff:.2f} of {lim:g} A")
-        if sat > 0:
-            level = max(level, WARN)
-            why.append(f"voltage saturation {sat:.0%} of the last {self._win_periods} periods")
-        if j.watchdog_active:
-            level = max(level, WARN)
-            why.append(f"command watchdog: no command for {self._watchdog_ns * 1e-9:g} s, holding zero current")
-        if j.win_rejected:
-            level = max(level, WARN)
-            why.append(f"{j.win_rejected} command(s) rejected: {j.last_rejection}")
-        if self.recording_error:
-            level = ERROR
-            why.append(self.recording_error)
-        if self._win_slips:
-            level = max(level, WARN)
-            why.append(f"cannot keep time_factor {self._time_factor:g} (achieved {self.real_time_factor:.2f})")
-        values = {
-            "sim_time [s]": f"{t_ns * 1e-9:.6f}",
-            "real_time_factor": f"{self.real_time_factor:.3f}",
-            "mode": "lock_step" if self.lock_step else
-                    "as_fast_as_possible" if self.as_fast_as_possible else f"time_factor {self._time_factor:g}",
-            "command": f"{j.command_kind} {j.command_value:g}",
-            "i_q [A]": f"{o['i_q']:.4f}", "i_q_ref [A]": f"{o['i_q_ref']:.4f}",
-            "v_magnitude_q [V]": f"{o['v_magnitude_q']:.4f}", "v_limit_q [V]": f"{o['v_limit_q']:.4f}",
-            "voltage_saturated_fraction": f"{sat:.3f}",
-            "velocity_out [rad/s]": f"{o['velocity_out']:.4f}", "effort_out [N*m]": f"{o['effort_out']:.4f}",
-            "winding_temperature [degC]": f"{T_w:.3f}",
-            "housing_temperature [degC]": f"{o['T_housing']:.3f}",
-            "current_limit_effective [A]": f"{lim_eff:.4f}",
-            "tripped": str(bool(o["tripped"])).lower(),
-            "watchdog_active": str(j.watchdog_active).lower(),
-            "commands_received": str(j.commands_received),
-            "commands_rejected": str(j.commands_rejected),
-            "last_rejection": j.last_rejection,
-            "recording": self.recording_error or (str(self.node_values["node.record"]) if self.recorder else "off"),
-        }
-        name = f"{self.get_fully_qualified_name()}: " + (j.name if self.multi else "actuator")
-        return DiagnosticStatus(level=level, name=name, message="; ".join(why) if why else "OK",
-                                hardware_id=j.name, values=[KeyValue(key=k, value=v) for k, v in values.items()])
+    def _status(self, h: Health) -> DiagnosticStatus:
+        name = f"{self.get_fully_qualified_name()}: " + (h.joint if self.multi else "actuator")
+        return DiagnosticStatus(level=bytes([h.level]), name=name, message=h.message, hardware_id=h.joint,
+                                values=[KeyValue(key=k, value=v) for k, v in h.values.items()])
 
     def diagnostic_statuses(self, outs: list[dict] | None = None) -> list[DiagnosticStatus]:
-        """One diagnostics status per joint (and the window reset)."""
-        outs = outs or [None] * len(self.joints)
-        statuses = [self._joint_status(j, o) for j, o in zip(self.joints, outs)]
-        self._reset_window()
-        return statuses
+        """One diagnostics status per joint (over the window since the last one, which this resets)."""
+        rec = self.recording_error or (str(self.node_values["node.record"]) if self.recorder else "off")
+        health = self.scheduler.health(outs, error=self.recording_error, values={"recording": rec})
+        return [self._status(h) for h in health]
+
+    def diagnostic_status(self, joint: int = 0) -> DiagnosticStatus:
+        """The current diagnostics entry of one joint (level, message, key values); also resets the window."""
+        return self.diagnostic_statuses()[joint]
 
     def _publish_diagnostics(self, outs: list[dict], t_ns: int) -> None:
         msg = DiagnosticArray(status=self.diagnostic_statuses(outs))
@@ -509,120 +379,42 @@ class ActuatorNode(Node):
 
     # ------------------------------------------------------------------------------------ commands
 
-    def _reject(self, j: _Joint | None, topic: str, reason: str) -> None:
-        self.commands_rejected += 1
-        self.last_rejection = f"{topic}: {reason}"
-        self.rejections.append(self.last_rejection)
-        for jj in ([j] if j is not None else self.joints):
-            jj.commands_rejected += 1
-            jj.win_rejected += 1
-            jj.last_rejection = self.last_rejection
-        self.get_logger().warning(f"rejected command on {topic}: {reason}", throttle_duration_sec=1.0)
-
     def _record_in(self, sub, msg) -> None:
         if self.recorder is not None:
             self._write(sub.topic_name, msg, self.t_ns)
 
-    def _apply(self, j: _Joint, topic: str, kind: str, value) -> bool:
-        """Validate and apply one joint's command; False (and counted, reported) when rejected."""
-        unit = "A" if kind == "current" else "N*m"
-        if not isinstance(value, float) or not math.isfinite(value):
-            self._reject(j, topic, f"{kind} command{self._for(j)} must be a finite number [{unit}], got {value!r}")
-            return False
-        if abs(value) > j.absurd_limit(kind):
-            self._reject(j, topic, f"{kind} command{self._for(j)} {value:g} {unit} is absurd (more than "
-                         f"{ABSURD_FACTOR:g} x drive.current_limit: |value| <= {j.absurd_limit(kind):g} {unit})")
-            return False
-        try:
-            if kind == "current":
-                j.actuator.set_current_command(value)
-            else:
-                j.actuator.set_torque_command(value)
-        except Exception as exc:  # noqa: BLE001 - the node never dies on a message
-            self._reject(j, topic, f"{type(exc).__name__}: {exc}")
-            return False
-        j.command_kind, j.command_value = kind, value
-        j.commands_received += 1
-        self.commands_received += 1
-        j.last_command_ns = j.actuator.t_ns
-        if j.watchdog_active:
-            j.watchdog_active = False
-            self.get_logger().info(f"command watchdog cleared{self._for(j)}: commands are back")
-        return True
-
-    def _for(self, j: _Joint) -> str:
-        return f" for joint {j.name}" if self.multi else ""
-
-    def _lock_step_period(self) -> None:
-        """In lock-step mode a command (also a rejected one, so a controller waiting for joint_states never
-        stalls) advances one period."""
-        if self.lock_step and not self.finished:
-            self._advance_period()
-
-    def _on_scalar(self, j: _Joint, sub, kind: str, msg: Float64) -> None:
+    def _on_scalar(self, j: JointCommand, sub, kind: str, msg: Float64) -> None:
         self._record_in(sub, msg)
         with self._lock:
-            self._apply(j, sub.topic_name, kind, msg.data)
+            self.scheduler.command(j, kind, msg.data, sub.topic_name)
             if not self.multi:   # several joints: only whole-robot commands advance a lock-step period
-                self._lock_step_period()
+                self.scheduler.lock_step_period()
 
     def _on_commands(self, msg: Float64MultiArray) -> None:
         """ros2_control ForwardCommandController convention: one value per joint, ``joints`` order."""
         self._record_in(self.sub_commands, msg)
-        kind = "torque" if self._commands_interface == "effort" else "current"
-        topic = self.sub_commands.topic_name
         with self._lock:
-            if len(msg.data) != len(self.joints):
-                names = ", ".join(j.name for j in self.joints)
-                self._reject(None, topic, f"expected {len(self.joints)} element(s) ({self._commands_interface} "
-                             f"for {names}), got {len(msg.data)}")
-            else:
-                for j, value in zip(self.joints, msg.data):
-                    self._apply(j, topic, kind, float(value))
-            self._lock_step_period()
+            self.scheduler.commands(msg.data, self._commands_topic)
+            self.scheduler.lock_step_period()
 
     def _on_joint_commands(self, msg: JointState) -> None:
-        """sensor_msgs/JointState commands as ros2_control's topic_based hardware interface sends them: all
-        joint names; ``effort`` filled for joints with an effort command interface (in ``name`` order).
-        Position or velocity commands are rejected (this node is a torque-controlled actuator)."""
+        """sensor_msgs/JointState commands as ros2_control's topic_based hardware interface sends them (see
+        :meth:`bldc_actuator.scheduler.Scheduler.joint_commands`)."""
         self._record_in(self.sub_joint_commands, msg)
-        topic = self.sub_joint_commands.topic_name
         with self._lock:
-            by_name = {j.name: j for j in self.joints}
-            names = list(msg.name)
-            if (len(msg.position) or len(msg.velocity)) and not len(msg.effort):
-                self._reject(None, topic, "position/velocity commands are not supported: give each joint only "
-                             "<command_interface name=\"effort\"/> (output torque [N*m]) in <ros2_control>")
-            elif len(msg.effort) != len(names):
-                self._reject(None, topic, f"expected one effort per name ({len(names)} names, "
-                             f"{len(msg.effort)} efforts); mixed command interfaces are not supported")
-            else:
-                unknown = [n for n in names if n not in by_name]
-                if unknown:
-                    self._reject(None, topic, f"unknown joint(s) {', '.join(unknown)} "
-                                 f"(this node has {', '.join(by_name)})")
-                for name, value in zip(names, msg.effort):
-                    if name in by_name:
-                        self._apply(by_name[name], topic, "torque", float(value))
-            self._lock_step_period()
+            self.scheduler.joint_commands(msg.name, msg.position, msg.velocity, msg.effort,
+                                          self._joint_commands_topic)
+            self.scheduler.lock_step_period()
 
-    def _on_load(self, j: _Joint, msg: Float64) -> None:
-        self._record_in(j.sub_load, msg)
+    def _on_load(self, j: JointCommand, jt: JointTopics, msg: Float64) -> None:
+        self._record_in(jt.sub_load, msg)
         with self._lock:
-            v = msg.data
-            if not math.isfinite(v) or abs(v) > SPECS["load.load_torque"].range[1]:
-                self._reject(j, j.sub_load.topic_name, f"load torque must be finite and within "
-                             f"+-{SPECS['load.load_torque'].range[1]:g} N*m, got {v!r}")
-                return
-            j.actuator.set_load_torque(v)
-            j.load_torque_extra = v
+            self.scheduler.load_torque(j, msg.data, jt.sub_load.topic_name, SPECS["load.load_torque"].range[1])
 
-    def _on_reset(self, j: _Joint, msg: Empty) -> None:
-        self._record_in(j.sub_reset, msg)
+    def _on_reset(self, j: JointCommand, jt: JointTopics, msg: Empty) -> None:
+        self._record_in(jt.sub_reset, msg)
         with self._lock:
-            was = j.actuator.state.tripped
-            j.actuator.reset_fault()
-            self.get_logger().info(f"fault reset{self._for(j)}" + ("" if was else " (no trip was latched)"))
+            self.scheduler.reset_fault(j)
 
     # ------------------------------------------------------------------------------------ parameters
 
@@ -635,24 +427,27 @@ class ActuatorNode(Node):
                     model[p.name] = NP.from_ros(SPECS[p.name].type, p.value)
                 elif p.name in NP.NODE_PARAMS:
                     node[p.name] = NP.check_node_value(p.name, p.value)
-            new = [from_flat(model, base=j.params) for j in self.joints] if model else None
+            new = [from_flat(model, base=self.plant.params(j.name)) for j in self.joints] if model else None
         except ParameterError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         with self._lock:
             if new is not None:   # a node-level model parameter applies to every joint
                 for j, params in zip(self.joints, new):
-                    j.actuator.update_params(params)
-                    j.params = params
+                    self.scheduler.update_params(j, params)
             for name, value in node.items():
                 self.node_values[name] = value
                 if name == "node.time_factor":
-                    self._time_factor = value
-                    if not self.lock_step:
-                        self._anchor()
+                    if self._timer is not None:   # re-time the wake-ups (one per period of wall time)
+                        self.destroy_timer(self._timer)
+                        self._timer = None
+                        self.scheduler.set_time_factor(value)
+                        self._start_timer()
+                    else:
+                        self.scheduler.set_time_factor(value)
                 elif name == "node.watchdog_timeout":
-                    self._watchdog_ns = int(round(value * 1e9))
+                    self.scheduler.set_watchdog_timeout(int(round(value * 1e9)))
                 elif name == "node.commands_interface":
-                    self._commands_interface = value
+                    self.scheduler.set_commands_interface(value)
             if self.recorder is not None and (model or node):
                 ev = ParameterEvent(node=self.get_fully_qualified_name(),
                                     changed_parameters=[p.to_parameter_msg() for p in plist])
@@ -669,13 +464,13 @@ class ActuatorNode(Node):
         """Flat dict of everything that defines the run: every model parameter (of the first joint), ``node.*``,
         ``preset``; with several joints also ``joints`` and every joint's full set as ``joint.<name>.<param>``."""
         flat = lambda p: {k: (list(v) if isinstance(v, tuple) else v) for k, v in p.to_flat().items()}  # noqa: E731
-        out: dict[str, Any] = flat(self.joints[0].params)
+        out: dict[str, Any] = flat(self.plant.params(self.joints[0].name))
         out.update(self.node_values)
         out["preset"] = self.preset
         if self.multi:
             out[NP.JOINTS] = [j.name for j in self.joints]
             for j in self.joints:
-                out.update({f"{NP.JOINT_PREFIX}{j.name}.{k}": v for k, v in flat(j.params).items()})
+                out.update({f"{NP.JOINT_PREFIX}{j.name}.{k}": v for k, v in flat(self.plant.params(j.name)).items()})
         return out
 
     # ------------------------------------------------------------------------------------ recording
@@ -705,7 +500,7 @@ class ActuatorNode(Node):
     def _open_recorder(self, path: str) -> None:
         from .recording import McapRecorder
 
-        meta = {"node": self.get_fully_qualified_name(), "joint_name": self.joint_name,
+        meta = {"node": self.get_fully_qualified_name(), "joint_name": self.joints[0].name,
                 "joints": ",".join(j.name for j in self.joints),
                 "time": "log_time = simulation time [ns]", "package": "bldc_actuator"}
         self.recorder = McapRecorder(path, parameters=self.all_parameters(), metadata=meta)
@@ -713,7 +508,7 @@ class ActuatorNode(Node):
                   (self.sub_commands, Float64MultiArray)]
         if self.sub_joint_commands is not None:
             topics.append((self.sub_joint_commands, JointState))
-        for j in self.joints:
+        for j in self.topics:
             topics += [(j.pub_phase, Float64MultiArray), (j.pub_q, Float64MultiArray), (j.pub_tw, Temperature),
                        (j.pub_th, Temperature), (j.sub_current, Float64), (j.sub_torque, Float64),
                        (j.sub_load, Float64), (j.sub_reset, Empty)]
@@ -743,8 +538,9 @@ are ~/<joint>/...):
        per joint), ~/reset_fault (std_msgs/Empty, per joint), node.joint_commands_topic (sensor_msgs/JointState
        effort by joint name: ros2_control's topic_based hardware interface)
   out: node.joint_states_topic (joint_states: every joint), ~/phase_currents, ~/q_axis_state,
-       ~/winding_temperature, ~/housing_temperature (per joint, at node.detail_rate), /diagnostics (one status
-       per joint), /clock (node.publish_clock)
+       ~/winding_temperature, ~/housing_temperature (per joint, at node.detail_rate, on demand: only while
+       subscribed, or recording), /diagnostics (one status per joint; level changes are also logged),
+       /clock (node.publish_clock)
 
 Per-joint parameters: joint.<name>.preset, joint.<name>.params_file, joint.<name>.<model parameter>.
 
@@ -798,8 +594,8 @@ OWN_FLAGS = {"--record": "PATH", "--executor": "events|single"}
 def make_executor(kind: str | None = None, context=None):
     """``events`` (rclpy.experimental.EventsExecutor, ROS 2 Kilted+; the default where it exists) or
     ``single`` (SingleThreadedExecutor; the default on older ROS 2). Measured (benchmarks/bench_node.py,
-    12 joints at 1 kHz): events keeps 1000 Hz on a third of a core, single needs a whole one, and events makes
-    lock-step round trips about 5x faster."""
+    12 joints at 1 kHz): events needs about a third of the CPU single does, and makes lock-step round trips
+    several times faster."""
     if kind in (None, "events"):
         try:
             from rclpy.experimental import EventsExecutor
@@ -846,7 +642,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         overrides = [Parameter("node.record", Parameter.Type.STRING, record)] if record else None
         try:
-            node = ActuatorNode(parameter_overrides=overrides)
+            node = ActuatorNode(parameter_overrides=overrides, start=False)
         except (ParameterError, FileNotFoundError) as exc:
             print(f"actuator_node: parameter error: {exc}", file=sys.stderr)
             return 2
@@ -858,8 +654,9 @@ def main(argv: list[str] | None = None) -> int:
         node.get_logger().info(
             f"running: {'lock-step' if node.lock_step else 'time_factor ' + str(node.node_values['node.time_factor'])}"
             f", {len(node.joints)} joint(s), publish {1e9 / node.period_ns:g} Hz, physics "
-            f"{node.params.drive.current_loop_rate:g} Hz; kernel ready in {node.kernel_warm_up_s:.2f} s "
+            f"{node.plant.params(node.joints[0].name).drive.current_loop_rate:g} Hz; kernel ready in {node.kernel_warm_up_s:.2f} s "
             f"({'compiled' if COMPILED else 'pure Python'})")
+        node.start()   # last: simulation time is tied to the wall clock from here, right before spinning
         # with a timeout: EventsExecutor's spin_until_future_complete without one never returns (Kilted)
         while not node.done.done() and rclpy.ok():
             executor.spin_until_future_complete(node.done, timeout_sec=0.25)

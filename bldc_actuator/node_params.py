@@ -13,7 +13,8 @@ Rules
   the same way :func:`params.params_from_dict` does (explicit ``motor.*`` values win);
 * parameters that are not ``runtime`` in SPECS are ``read_only``: ROS rejects changing them while running;
 * an integer written where a double is expected (``bus_voltage: 48``) is accepted as ``48.0``;
-* unknown parameters in the model sections or under ``node.`` are an error (typos must not pass silently).
+* an unknown parameter is an error naming the nearest known one (typos must not pass silently), except
+  ROS's own (``use_sim_time``, ``qos_overrides.*``, ``start_type_description_service``).
 """
 
 from __future__ import annotations
@@ -77,7 +78,8 @@ NODE_PARAMS: dict[str, NodeParam] = {p.name: p for p in (
               "commands, joints matched by name, effort = output torque [N*m] (ros2_control's topic_based "
               "hardware interface publishes /robot_joint_command); empty = off"),
     NodeParam("node.detail_rate", float, 0.0, "Hz", "rate (per second of simulation time) of the per-joint "
-              "~/[<joint>/]q_axis_state, phase_currents and temperatures; 0 = every publish period",
+              "~/[<joint>/]q_axis_state, phase_currents and temperatures; 0 = every publish period (published on "
+              "demand: only while subscribed, and always while recording)",
               (0.0, 100000.0)),
 )}
 
@@ -213,10 +215,25 @@ def declare_all(node) -> tuple[P.ActuatorParams, dict[str, Any], str]:
         section = name.split(".", 1)[0]
         if section in P.SECTIONS or section == "node":
             known = sorted(P.SPECS) if section in P.SECTIONS else sorted(NODE_PARAMS)
-            raise P.ParameterError(name, "unknown parameter (known in this section: "
+            raise P.ParameterError(name, "unknown parameter" + nearest_hint(name, known) + " (known in this section: "
                                    + ", ".join(k for k in known if k.startswith(section + ".")) + ")")
-        node.get_logger().warning(f"ignoring parameter {name!r}: not a parameter of this node")
+        raise P.ParameterError(name, "unknown parameter" + nearest_hint(name, _known_names()))
     return P.from_flat(flat), node_values, preset
+
+
+def _known_names() -> list[str]:
+    return [PRESET, JOINTS, *NODE_PARAMS, *P.SPECS]
+
+
+def nearest_hint(name: str, known: list[str]) -> str:
+    """``"; did you mean 'preset'?"`` for the closest known name (or the known top-level names)."""
+    import difflib
+
+    close = difflib.get_close_matches(name, known, n=1, cutoff=0.6)
+    if close:
+        return f"; did you mean {close[0]!r}?"
+    top = sorted({k.split(".", 1)[0] + ("" if "." not in k else ".*") for k in known})
+    return f" (known: {', '.join(top)}, joint.<name>.*)"
 
 
 def check_node_value(name: str, value: Any) -> Any:

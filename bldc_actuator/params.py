@@ -98,7 +98,7 @@ class DriveParams:
                                       "phases gives ripple at twice the electrical frequency)", 0.5, 1.5)
     current_sensor_gain_b: float = _p(1.0, "1", "gain of the phase-b current sensor", 0.5, 1.5)
     dead_time: float = _p(0.0, "s", "inverter dead time t_d: each leg's average voltage falls short by "
-                          "t_d f_pwm V_bus against its current (wye windings)", 0.0, 1e-5)
+                          "t_d f_pwm V_bus against its line current (wye or delta)", 0.0, 1e-5)
     pwm_frequency: float = _p(20000.0, "Hz", "PWM switching frequency f_pwm (sets the dead-time voltage)",
                               1000.0, 200000.0)
     current_loop_delay: float = _p(0.0, "s", "computation delay: the voltage computed from the sample at a "
@@ -311,9 +311,6 @@ def validate(params: ActuatorParams) -> None:
     if d.trip_temperature <= d.derate_temperature:
         raise ParameterError("drive.trip_temperature", f"must be above drive.derate_temperature "
                              f"({d.derate_temperature:g} degC), got {d.trip_temperature:g} degC")
-    if d.dead_time > 0 and params.motor.winding != "wye":
-        raise ParameterError("drive.dead_time", "the dead-time voltage error is modelled for wye windings only "
-                             f"(motor.winding is {params.motor.winding}); expected 0 s")
     if d.current_loop_delay > 1.0 / d.current_loop_rate * (1 + 1e-9):
         raise ParameterError("drive.current_loop_delay",
                              f"{d.current_loop_delay:g} s is longer than one loop period "

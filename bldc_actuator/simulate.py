@@ -57,13 +57,28 @@ def register(sub) -> None:
     p.add_argument("--f0", type=positive("--f0"), default=1.0, help="chirp start frequency [Hz]")
     p.add_argument("--f1", type=positive("--f1"), default=100.0, help="chirp end frequency [Hz]")
     p.add_argument("--duration", type=positive("--duration"), default=1.0, help="[s]")
-    p.add_argument("--rate", type=positive("--rate"), default=1000.0, help="command and output sample rate [Hz]")
+    p.add_argument("--rate", type=positive("--rate"), default=1000.0,
+                   help="output sample rate [Hz] of every profile (csv too: its rows are commands, held until the "
+                        "next row); also the command rate of step, sine and chirp")
     p.add_argument("--input", type=Path, help="CSV of commands for --profile csv (time, current_command or "
                    "torque_command, optional load_torque)")
     p.add_argument("--load-torque", type=float, default=None, help="constant external load at the output [N*m]")
     p.add_argument("--out", type=Path, default=Path("out/simulate"), help="output prefix (writes PREFIX.csv/.png)")
     p.add_argument("--no-plot", action="store_true", help="skip the PNG")
     p.set_defaults(func=run)
+
+
+def simulate_profile(params: ActuatorParams | str | Path, profile: profiles.Profile, *,
+                     rate: float | None = 1000.0) -> SimResult:
+    """Run ``profile`` through a fresh :class:`Actuator` of ``params`` (ActuatorParams, or a preset name or
+    parameter file for :func:`~bldc_actuator.params.load_preset`); every signal sampled at ``rate`` [Hz]
+    whatever the profile's own rows (``None``: at the profile's samples). What ``bldc-actuator simulate``
+    computes."""
+    if not isinstance(params, ActuatorParams):
+        params = load_preset(params)
+    if rate is not None and not (rate > 0 and np.isfinite(rate)):
+        raise ValueError(f"rate: expected > 0 Hz, got {rate!r}")
+    return Actuator(params).run(profile, record_every=None if rate is None else 1.0 / rate)
 
 
 def load_params(args) -> ActuatorParams:
@@ -154,7 +169,8 @@ def run(args) -> int:
         print(f"bldc-actuator simulate: {exc}", file=sys.stderr)
         return 2
     act = Actuator(params)
-    result = act.run(prof)
+    # outputs at --rate whatever the profile: a CSV of a few command rows still gives a full trace
+    result = act.run(prof, record_every=1.0 / args.rate)
     csv_path = args.out.with_suffix(".csv")
     write_csv(result, csv_path)
     print(f"wrote {csv_path} ({len(CSV_COLUMNS)} columns)")

@@ -5,8 +5,23 @@
 #                                                    ROS domain-id range, see test/conftest.py)
 #        bash scripts/test.sh -m "not slow"
 set -euo pipefail
-source "$(dirname "${BASH_SOURCE[0]}")/env.sh"
+CALLER_DIR="$PWD"
+source "$(dirname "${BASH_SOURCE[0]}")/env.sh"   # (cd's to the repository)
 set +e
+# test paths given relative to the caller's directory stay the caller's; without any, the whole test/ tree
+args=()
+paths=0
+for a in "$@"; do
+    p="${a%%::*}"
+    if [[ "$a" != -* && "$a" != /* && -e "$CALLER_DIR/$p" ]]; then
+        args+=("$CALLER_DIR/$a"); paths=1
+    elif [[ "$a" != -* && -e "$p" ]]; then
+        args+=("$a"); paths=1
+    else
+        args+=("$a")
+    fi
+done
+[[ $paths == 1 ]] || args=(test "${args[@]}")
 # The physics kernel is compiled with numba; the same source also runs as plain Python
 # (BLDC_ACTUATOR_NO_NUMBA=1). A full run (no test paths, -k or -m given) first runs the physics test files on
 # that pure-Python path too, so every physics test runs on both paths.
@@ -22,7 +37,7 @@ if [[ $both == 1 && "${BLDC_TEST_PYTHON_KERNEL:-1}" != 0 ]]; then
     rc=$?
     echo "test.sh: full suite (compiled kernel)"
 fi
-"$VENV/bin/python" -m pytest test "$@"
+"$VENV/bin/python" -m pytest "${args[@]}"
 rc2=$?
 [[ $rc -eq 0 ]] && rc=$rc2
 set -e

@@ -59,11 +59,15 @@ def test_real_findings_match_the_documented_ones(real_run):
     # odrive-d5065/odrive_data: K_t 0.02888 ± 6.8e-05 N·m/A (docs/realdata-results.md)
     kt = _rows(rows, "odrive_data", "tracked", "torque_constant_q")
     assert len(kt) == 1 and kt[0]["value"] == pytest.approx(0.02888, rel=0.02)
-    # ak80-9/sysid_final/trial8: torque_constant_error accepted, K_t 0.1249 ± 0.00076 (ratio 1.681)
-    f = _rows(rows, "sysid_final/trial8", "finding", "torque_constant_q")
-    assert len(f) == 1 and f[0]["value"] == pytest.approx(0.1249, rel=0.02)
+    # ak80-9/sysid_final/trial8: torque_constant_error accepted, K_t 0.1249 ± 0.00076 (ratio 1.681): ONE row, the
+    # tracked K_t with what diagnose accepted folded in (not a second "finding" row)
+    assert _rows(rows, "sysid_final/trial8", "finding", "torque_constant_q") == []
     t = _rows(rows, "sysid_final/trial8", "tracked", "torque_constant_q")
-    assert t[0]["value"] == pytest.approx(f[0]["value"], rel=0.02)
+    assert len(t) == 1 and t[0]["accepted"] and t[0]["diagnosis"].startswith("accepted")
+    assert t[0]["diagnose_value"] == pytest.approx(0.1249, rel=0.02)
+    assert t[0]["value"] == pytest.approx(t[0]["diagnose_value"], rel=0.02)
+    keys = [(r["recording"], r["joint"], r["parameter"]) for r in rows]
+    assert len(keys) == len(set(keys))
     # ak80-9 torque_vs_angle/synchronized_trial_4: once-per-output-turn load 0.17 ± 0.06 N·m, cogging 0.040 N·m
     g = _rows(rows, "synchronized_trial_4/test-opposing-motor", "finding", "gravity_torque")
     assert len(g) == 1 and g[0]["value"] == pytest.approx(0.1723, abs=0.03)

@@ -524,11 +524,9 @@ def test_dead_time_voltage_is_compensated_by_the_current_loop():
     assert s.v_d == pytest.approx(R * s.i_d - e_d, abs=1e-4)
     assert math.hypot(e_d, e_q) > 0.5 * v_dt          # a real correction, not a no-op
     # the angle average of e_q per V_dt that diagnose uses to turn a fitted voltage into drive.dead_time
-    from bldc_actuator.diagnosis.candidates import DEAD_TIME_Q_FACTOR
+    from bldc_actuator.diagnosis.candidates import dead_time_q_factor
 
     grid = np.linspace(0.0, 2 * np.pi, 200001)[:-1]
     a, b, c = frames.dq_to_abc(0.0, 1.0, grid)
     assert -np.mean(frames.abc_to_dq(-np.sign(a), -np.sign(b), -np.sign(c), grid)[1]) == pytest.approx(
-        DEAD_TIME_Q_FACTOR, rel=1e-4)
-    with pytest.raises(Exception, match="drive.dead_time"):
-        ActuatorParams().replace(**{"drive.dead_time": 1e-6, "motor.winding": "delta"})
+        dead_time_q_factor("wye"), rel=1e-4)      # delta windings: test_dead_time.py

@@ -34,6 +34,15 @@ def msgs():
     return JointState, Temperature, Float64, Float64MultiArray, Empty, DiagnosticArray
 
 
+def act(node):
+    """The (first) joint's Actuator of the node's default plant."""
+    return node.plant.actuator(node.joints[0].name)
+
+
+def params(node):
+    return node.plant.params(node.joints[0].name)
+
+
 def t_of(stamp) -> int:
     return stamp.sec * 1_000_000_000 + stamp.nanosec
 
@@ -73,7 +82,7 @@ def test_every_model_parameter_is_declared_with_descriptor(ros_context, ros_exec
                  "node.watchdog_timeout", "node.joint_name", "node.commands_interface", "node.record",
                  "node.diagnostics_rate", "preset"):
         assert node.has_parameter(name), name
-    assert node.params == ActuatorParams()
+    assert params(node) == ActuatorParams()
 
 
 def test_params_file_preset_and_overrides(ros_context, ros_executor, tmp_path):
@@ -86,13 +95,13 @@ def test_params_file_preset_and_overrides(ros_context, ros_executor, tmp_path):
                      "      bus_voltage: 48\n    effects:\n      cogging_order: 42\n      cogging_cos: [0.01]\n"
                      "      cogging_sin: [0.0]\n    node:\n      joint_name: knee\n      lock_step: true\n")
     node = make_node(ros_context, ros_executor, cli_args=["--ros-args", "--params-file", str(pfile)])
-    p = node.params
+    p = params(node)
     assert p.drive.bus_voltage == 48.0          # file wins over the preset
     assert p.gear.gear_ratio == 9.0             # preset value
     assert p.motor.phase_resistance == 0.2
     assert p.effects.cogging_cos == (0.01,) and p.effects.cogging_order == 42
-    assert node.joint_name == "knee" and node.lock_step
-    assert node.actuator.params == p
+    assert node.joints[0].name == "knee" and node.lock_step
+    assert act(node).params == p
 
 
 @pytest.mark.parametrize("overrides, field, text", [
@@ -118,23 +127,23 @@ def test_runtime_parameters_apply_and_others_are_rejected(ros_context, ros_execu
     node = make_node(ros_context, ros_executor, params={"node.lock_step": True})
     res = node.set_parameters([Parameter("drive.bus_voltage", value=48.0)])[0]
     assert res.successful, res.reason
-    assert node.actuator.params.drive.bus_voltage == 48.0
-    assert node.actuator.outputs()["v_limit_q"] == pytest.approx(48.0 / math.sqrt(2))
+    assert act(node).params.drive.bus_voltage == 48.0
+    assert act(node).outputs()["v_limit_q"] == pytest.approx(48.0 / math.sqrt(2))
     # non-runtime: read-only
     res = node.set_parameters([Parameter("motor.phase_resistance", value=0.3)])[0]
     assert not res.successful and "read-only" in res.reason
-    assert node.params.motor.phase_resistance == 0.17
+    assert params(node).motor.phase_resistance == 0.17
     # cross-field check from params.from_flat
     res = node.set_parameters([Parameter("drive.trip_temperature", value=90.0)])[0]
     assert not res.successful
     assert res.reason.startswith("drive.trip_temperature:") and "derate_temperature" in res.reason
-    assert node.params.drive.trip_temperature == 120.0
+    assert params(node).drive.trip_temperature == 120.0
     # out of range (rclpy's descriptor check) and a bad choice for a node parameter
     assert not node.set_parameters([Parameter("drive.bus_voltage", value=-1.0)])[0].successful
     res = node.set_parameters([Parameter("node.commands_interface", value="velocity")])[0]
     assert not res.successful and "node.commands_interface" in res.reason
     assert node.set_parameters([Parameter("node.commands_interface", value="current")])[0].successful
-    assert node.params.drive.bus_voltage == 48.0
+    assert params(node).drive.bus_voltage == 48.0
 
 
 # ------------------------------------------------------------------------------------------- commands
@@ -175,12 +184,12 @@ def test_commands_array_interfaces_and_bad_messages(ros_context, ros_executor):
     for topic, mtype in (("commands", Float64MultiArray), ("current_command", Float64), ("torque_command", Float64)):
         probe.connect(ns + topic, mtype)
     wait_heard(node.pub_diag)
-    p = node.params
+    p = params(node)
     # effort interface: output torque
     probe.publish(ns + "commands", Float64MultiArray(data=[0.5]))
     assert wait_for(lambda: node.periods >= 1, T)
-    assert node.command_kind == "torque" and node.command_value == 0.5
-    assert node.actuator.state.i_q_ref == pytest.approx(0.5 / p.motor.torque_constant_q)
+    assert node.joints[0].kind == "torque" and node.joints[0].value == 0.5
+    assert act(node).state.i_q_ref == pytest.approx(0.5 / p.motor.torque_constant_q)
     # bad messages: each is rejected, the held command stays, time still advances one period each
     bad = [(ns + "commands", Float64MultiArray(data=[1.0, 2.0])), (ns + "commands", Float64MultiArray(data=[])),
            (ns + "current_command", Float64(data=math.nan)), (ns + "torque_command", Float64(data=math.inf)),
@@ -188,7 +197,7 @@ def test_commands_array_interfaces_and_bad_messages(ros_context, ros_executor):
     for topic, m in bad:
         probe.publish(topic, m)
     assert wait_for(lambda: node.commands_rejected == len(bad) and node.periods == 1 + len(bad), T)
-    assert node.command_kind == "torque" and node.command_value == 0.5
+    assert node.joints[0].kind == "torque" and node.joints[0].value == 0.5
     reasons = "\n".join(node.rejections)
     for text in ("got 2", "got 0", "got nan", "got inf", "absurd"):
         assert text in reasons
@@ -197,8 +206,8 @@ def test_commands_array_interfaces_and_bad_messages(ros_context, ros_executor):
     # current interface
     assert node.set_parameters([Parameter("node.commands_interface", value="current")])[0].successful
     probe.publish(ns + "commands", Float64MultiArray(data=[2.5]))
-    assert wait_for(lambda: node.command_value == 2.5, T)
-    assert node.command_kind == "current" and node.actuator.state.i_q_ref == 2.5
+    assert wait_for(lambda: node.joints[0].value == 2.5, T)
+    assert node.joints[0].kind == "current" and act(node).state.i_q_ref == 2.5
     assert node.commands_received == 2
 
 
@@ -210,11 +219,11 @@ def test_watchdog_zeroes_current_and_reports(ros_context, ros_executor):
         .listen("/bldc_actuator/q_axis_state", Float64MultiArray)
     probe.connect("/bldc_actuator/current_command", Float64)
     wait_heard(node.pub_diag)
-    assert not node.watchdog_active  # armed only by the first command
+    assert not node.joints[0].watchdog_active  # armed only by the first command
     probe.publish("/bldc_actuator/current_command", Float64(data=3.0))
     assert wait_for(lambda: node.commands_received == 1, T)
-    t_cmd = node._last_command_ns
-    assert wait_for(lambda: node.watchdog_active and node.actuator.state.i_q_ref == 0.0, T)
+    t_cmd = node.joints[0].last_command_ns
+    assert wait_for(lambda: node.joints[0].watchdog_active and act(node).state.i_q_ref == 0.0, T)
     assert node.t_ns - t_cmd >= 50_000_000
     assert wait_for(lambda: any("watchdog" in s.message and s.level == b"\x01"
                                 for a in probe.get("/diagnostics") for s in a.status), T)
@@ -245,7 +254,7 @@ def test_thermal_derate_trip_and_reset(ros_context, ros_executor):
     assert wait_for(lambda: node.periods >= 1, T)
     st = node.diagnostic_status()
     assert st.level == WARN and "derating" in st.message
-    assert node.actuator.state.i_q_ref == pytest.approx(20.0 * (120.0 - node.actuator.state.T_winding) / 20.0,
+    assert act(node).state.i_q_ref == pytest.approx(20.0 * (120.0 - act(node).state.T_winding) / 20.0,
                                                         rel=1e-3)
     # derate beyond 50 %: ERROR (runtime change of the derate/trip temperatures)
     assert node.set_parameters([Parameter("drive.derate_temperature", value=80.0),
@@ -258,21 +267,21 @@ def test_thermal_derate_trip_and_reset(ros_context, ros_executor):
     assert node.set_parameters([Parameter("drive.trip_temperature", value=100.0)])[0].successful
     probe.publish(ns + "current_command", Float64(data=18.0))
     assert wait_for(lambda: node.periods >= 3, T)
-    assert node.actuator.state.tripped
+    assert act(node).state.tripped
     probe.publish(ns + "current_command", Float64(data=18.0))
     assert wait_for(lambda: node.periods >= 4, T)
-    assert node.actuator.state.i_q_ref == 0.0
+    assert act(node).state.i_q_ref == 0.0
     st = node.diagnostic_status()
     assert st.level == ERROR and "TRIP" in st.message and "reset_fault" in st.message
     # cool limits again (runtime) and reset over the topic: current flows again
     assert node.set_parameters([Parameter("drive.trip_temperature", value=200.0),
                                 Parameter("drive.derate_temperature", value=150.0)])[0].successful
-    assert node.actuator.state.tripped  # still latched until reset
+    assert act(node).state.tripped  # still latched until reset
     probe.publish(ns + "reset_fault", Empty())
-    assert wait_for(lambda: not node.actuator.state.tripped, T)
+    assert wait_for(lambda: not act(node).state.tripped, T)
     probe.publish(ns + "current_command", Float64(data=5.0))
     assert wait_for(lambda: node.periods >= 5, T)
-    assert node.actuator.state.i_q_ref == 5.0 and node.actuator.state.i_q > 1.0
+    assert act(node).state.i_q_ref == 5.0 and act(node).state.i_q > 1.0
     assert node.diagnostic_status().level != ERROR
 
 
@@ -290,12 +299,12 @@ def test_real_time_reaches_analytic_steady_speed(ros_context, ros_executor):
     t0 = node.t_ns
     assert wait_for(lambda: node.t_ns > t0 + 300_000_000, T)   # 0.3 s of simulation: >> mechanical rise
     js = probe.get("/joint_states")[-1]
-    expected = steady_speed_out(node.params, node.actuator.state.T_winding)
+    expected = steady_speed_out(params(node), act(node).state.T_winding)
     assert js.velocity[0] == pytest.approx(expected, rel=1e-3)       # first-order estimate (i_d neglected)
     from bldc_actuator.demo import steady_speed_analytic
 
-    st = node.actuator.state
-    exact, _ = steady_speed_analytic(node.params, st.T_winding, st.T_housing, 0.0, 1.0 / 0.091)
+    st = act(node).state
+    exact, _ = steady_speed_analytic(params(node), st.T_winding, st.T_housing, 0.0, 1.0 / 0.091)
     assert js.velocity[0] == pytest.approx(exact, rel=1e-6)          # full steady state of the model
     stamps = [t_of(m.header.stamp) for m in probe.get("/joint_states")]
     assert all(b - a == node.period_ns for a, b in zip(stamps, stamps[1:]))   # no gap, no duplicate
@@ -343,7 +352,7 @@ def test_two_actuators_by_namespace_are_independent(ros_context, ros_executor):
     hip = make_node(ros_context, ros_executor, namespace="/leg/hip",
                     params={"node.lock_step": True, "node.joint_name": "hip", "drive.bus_voltage": 36.0})
     assert knee.pub_joint.topic_name == "/leg/knee/joint_states"
-    assert knee.sub_current.topic_name == "/leg/knee/bldc_actuator/current_command"
+    assert knee.topics[0].sub_current.topic_name == "/leg/knee/bldc_actuator/current_command"
     probe = Probe(ros_context, ros_executor).listen("/leg/knee/joint_states", JointState) \
         .listen("/leg/hip/joint_states", JointState)
     probe.connect("/leg/knee/bldc_actuator/current_command", Float64)
@@ -360,7 +369,7 @@ def test_two_actuators_by_namespace_are_independent(ros_context, ros_executor):
     assert k.velocity[0] > 0.0 and h.velocity[0] == 0.0
     assert knee.t_ns == 5 * knee.period_ns and hip.t_ns == hip.period_ns
     assert knee.set_parameters([Parameter("drive.bus_voltage", value=12.0)])[0].successful
-    assert knee.params.drive.bus_voltage == 12.0 and hip.params.drive.bus_voltage == 36.0
+    assert params(knee).drive.bus_voltage == 12.0 and params(hip).drive.bus_voltage == 36.0
 
 
 # -------------------------------------------------------------------------------------------- helpers
@@ -381,7 +390,7 @@ def test_q_axis_layout_labels_match_model_outputs(ros_context, ros_executor):
     from bldc_actuator.node import PHASE_FIELDS, Q_AXIS_FIELDS, layout_labels
 
     node = make_node(ros_context, ros_executor, params={"node.lock_step": True})
-    assert layout_labels(node._m_q) == list(Q_AXIS_FIELDS)
-    assert layout_labels(node._m_phase) == list(PHASE_FIELDS)
-    assert set(Q_AXIS_FIELDS) <= set(node.actuator.outputs())
-    assert from_flat({}) == node.params
+    assert layout_labels(node.topics[0].m_q) == list(Q_AXIS_FIELDS)
+    assert layout_labels(node.topics[0].m_phase) == list(PHASE_FIELDS)
+    assert set(Q_AXIS_FIELDS) <= set(act(node).outputs())
+    assert from_flat({}) == params(node)

@@ -41,9 +41,9 @@ def test_three_joints_each_follow_their_own_command(ros_context, ros_executor):
     assert [j.name for j in node.joints] == JOINTS
     for j in node.joints:   # each joint is its own motor (its preset), the override applied to one only
         want = load_preset(PRESETS[j.name])
-        assert j.params.motor.torque_constant_q == want.motor.torque_constant_q
-        assert j.params.gear.gear_ratio == want.gear.gear_ratio
-    assert node.joints[2].params.drive.bus_voltage == 36.0 != load_preset("tmotor_u8").drive.bus_voltage
+        assert node.plant.params(j.name).motor.torque_constant_q == want.motor.torque_constant_q
+        assert node.plant.params(j.name).gear.gear_ratio == want.gear.gear_ratio
+    assert node.plant.params("ankle").drive.bus_voltage == 36.0 != load_preset("tmotor_u8").drive.bus_voltage
     probe = Probe(ros_context, ros_executor).listen("/joint_states", JointState)
     probe.connect("/bldc_actuator/commands", Float64MultiArray)
     wait_heard(node.pub_joint)
@@ -51,9 +51,9 @@ def test_three_joints_each_follow_their_own_command(ros_context, ros_executor):
     for _ in range(50):
         _send(probe, node, "/bldc_actuator/commands", Float64MultiArray(data=tau), node.periods)
     for j, t in zip(node.joints, tau):
-        p = j.params
-        assert j.command_kind == "torque" and j.command_value == t
-        assert math.isclose(j.actuator.state.i_q_ref, t / (p.motor.torque_constant_q * p.gear.gear_ratio),
+        p = node.plant.params(j.name)
+        assert j.kind == "torque" and j.value == t
+        assert math.isclose(node.plant.actuator(j.name).state.i_q_ref, t / (p.motor.torque_constant_q * p.gear.gear_ratio),
                             rel_tol=1e-12)
     assert wait_for(lambda: len(probe.get("/joint_states")) >= 40, T)
     last = probe.get("/joint_states")[-1]
@@ -74,21 +74,21 @@ def test_a_bad_command_for_one_joint_leaves_the_others_running(ros_context, ros_
     probe.connect("/bldc_actuator/knee/torque_command", Float64)
     _send(probe, node, "/bldc_actuator/commands", Float64MultiArray(data=[0.5, math.nan, -0.2]), node.periods)
     hip, knee, ankle = node.joints
-    assert hip.command_value == 0.5 and ankle.command_value == -0.2     # applied
+    assert hip.value == 0.5 and ankle.value == -0.2     # applied
     assert knee.commands_rejected == 1 and hip.commands_rejected == 0
     assert "knee" in knee.last_rejection and "finite" in knee.last_rejection
     # per-joint topic: an absurd torque for the knee only; the knee keeps its last good command
     probe.publish("/bldc_actuator/knee/torque_command", Float64(data=1e6))
     assert wait_for(lambda: knee.commands_rejected == 2, T)
     probe.publish("/bldc_actuator/knee/torque_command", Float64(data=0.04))
-    assert wait_for(lambda: knee.command_value == 0.04, T)
+    assert wait_for(lambda: knee.value == 0.04, T)
     before = node.periods
     for _ in range(20):
         _send(probe, node, "/bldc_actuator/commands", Float64MultiArray(data=[0.5, 0.04, -0.2]), node.periods)
     assert node.periods == before + 20
     status = {s.hardware_id: s for s in node.diagnostic_statuses()}
     assert set(status) == set(JOINTS)
-    assert hip.actuator.state.omega > 0 and ankle.actuator.state.omega < 0
+    assert node.plant.actuator("hip").state.omega > 0 and node.plant.actuator("ankle").state.omega < 0
     # wrong length: rejected for all, still one lock-step period (a waiting controller never stalls)
     n = node.periods
     _send(probe, node, "/bldc_actuator/commands", Float64MultiArray(data=[0.1]), n)
@@ -110,12 +110,41 @@ def test_ros2_control_topic_based_interface_contract(ros_context, ros_executor):
     for _ in range(30):
         _send(probe, node, "/robot_joint_command", cmd, node.periods)
     by = {j.name: j for j in node.joints}
-    assert by["ankle"].command_value == -0.3 and by["hip"].command_value == 0.6 and by["knee"].command_value == 0.02
+    assert by["ankle"].value == -0.3 and by["hip"].value == 0.6 and by["knee"].value == 0.02
     assert wait_for(lambda: len(probe.get("/robot_joint_states")) > 10, T)
     # position / velocity command interfaces: a clear rejection, nothing applied
     _send(probe, node, "/robot_joint_command", JointState(name=["hip"], position=[1.0]), node.periods)
     assert "position/velocity commands are not supported" in node.last_rejection
-    assert by["hip"].command_value == 0.6
+    assert by["hip"].value == 0.6
+    # position AND effort (a joint with both command interfaces): rejected as a whole, with the reason; the
+    # efforts it carries are not applied either
+    i_q_ref = {j: node.plant.outputs(j)["i_q_ref"] for j in JOINTS}
+    _send(probe, node, "/robot_joint_command",
+          JointState(name=["hip", "knee"], position=[1.0, 0.0], effort=[0.1, 0.01]), node.periods)
+    assert "position/velocity commands are not supported" in node.last_rejection
+    assert "position" in node.last_rejection.split("(this message carries", 1)[1]
+    assert by["hip"].value == 0.6 and by["knee"].value == 0.02
+    assert all(node.plant.outputs(j)["i_q_ref"] == i_q_ref[j] for j in JOINTS)
+    assert (by["hip"].commands_rejected, by["knee"].commands_rejected, by["ankle"].commands_rejected) == (2, 1, 0)
+
+
+def test_an_unknown_joint_name_is_rejected_for_that_name_only(ros_context, ros_executor):
+    """A joint command naming a joint this node does not have: that name is rejected (logged, counted at the
+    node), the named joints that exist are applied, and no joint's diagnostics turn WARN."""
+    from sensor_msgs.msg import JointState
+
+    node = _robot(ros_context, ros_executor, **{"node.joint_commands_topic": "/robot_joint_command"})
+    probe = Probe(ros_context, ros_executor)
+    probe.connect("/robot_joint_command", JointState)
+    node.diagnostic_statuses()                                   # start a fresh window
+    _send(probe, node, "/robot_joint_command",
+          JointState(name=["hip", "elbow", "knee"], effort=[0.2, 5.0, 0.01]), node.periods)
+    by = {j.name: j for j in node.joints}
+    assert by["hip"].value == 0.2 and by["knee"].value == 0.01            # the known names applied
+    assert node.commands_rejected == 1 and "unknown joint 'elbow'" in node.last_rejection
+    assert all(j.commands_rejected == 0 for j in node.joints)
+    levels = {s.hardware_id: s.level for s in node.diagnostic_statuses()}
+    assert levels == {j: b"\x00" for j in JOINTS}, levels
 
 
 def test_one_recording_diagnoses_per_joint(ros_context, ros_executor, tmp_path):
@@ -142,11 +171,11 @@ def test_one_recording_diagnoses_per_joint(ros_context, ros_executor, tmp_path):
     for j in node.joints:
         sig = loaders.load(path, joint=j.name)
         p = sig.meta["params_from_recording"]
-        assert p.motor.torque_constant_q == j.params.motor.torque_constant_q
-        assert p.drive.bus_voltage == j.params.drive.bus_voltage
+        assert p.motor.torque_constant_q == node.plant.params(j.name).motor.torque_constant_q
+        assert p.drive.bus_voltage == node.plant.params(j.name).drive.bus_voltage
         # the joint's own current and motor-side angle (output angle x ITS gear ratio)
-        assert abs(sig.channels["current"][-1] - j.actuator.state.i_q) < 1e-9
-        assert abs(sig.channels["position"][-1] - j.actuator.state.theta) < 1e-6 * max(1.0, abs(j.actuator.state.theta))
+        assert abs(sig.channels["current"][-1] - node.plant.actuator(j.name).state.i_q) < 1e-9
+        assert abs(sig.channels["position"][-1] - node.plant.actuator(j.name).state.theta) < 1e-6 * max(1.0, abs(node.plant.actuator(j.name).state.theta))
     # the diagnose command runs on one joint with the parameters stored for it
     from bldc_actuator import cli
 

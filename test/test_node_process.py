@@ -62,6 +62,15 @@ def test_bad_parameter_exits_with_a_clear_message(tmp_path):
     assert "Traceback" not in result.stderr
 
 
+def test_unknown_top_level_parameter_exits_2_naming_the_nearest():
+    """``-p presett:=ak80_9`` (a typo of ``preset``) must not run the built-in motor: exit 2, named."""
+    result = subprocess.run([str(venv_script()), "--ros-args", "-p", "presett:=ak80_9"],
+                            env=env_for(), capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2, result.stdout + result.stderr
+    assert "presett" in result.stderr and "did you mean 'preset'" in result.stderr
+    assert "Traceback" not in result.stderr
+
+
 @pytest.mark.parametrize("sig, executor", [(signal.SIGINT, "single"), (signal.SIGTERM, "single"),
                                            (signal.SIGINT, "events"), (signal.SIGTERM, "events")])
 def test_signal_finalizes_the_recording(tmp_path, sig, executor):
@@ -71,9 +80,12 @@ def test_signal_finalizes_the_recording(tmp_path, sig, executor):
     proc = subprocess.Popen([str(venv_script()), "--record", str(rec), "--executor", executor], env=env_for(),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        # running at real time: wait until a few chunks' worth of time has been simulated
+        # running at real time: the file appears when the node opens it (before it starts stepping), and
+        # grows when the first chunk (a few hundred ms of simulation) is written: wait for that
         assert wait_for(lambda: rec.exists() and rec.stat().st_size > 0 or proc.poll() is not None, 30)
-        time.sleep(0.5)
+        size0 = rec.stat().st_size if rec.exists() else 0
+        assert wait_for(lambda: rec.stat().st_size > size0 or proc.poll() is not None, 30)
+        time.sleep(0.2)
         assert proc.poll() is None, proc.communicate()
         proc.send_signal(sig)
         out, err = proc.communicate(timeout=30)

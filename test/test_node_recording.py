@@ -49,7 +49,7 @@ def test_recording_round_trip_and_resimulation(ros_context, ros_executor, tmp_pa
     for k in range(20):
         send("current_command", Float64(data=2.0 + 0.1 * k))
     probe.publish(ns + "load_torque", Float64(data=0.05))
-    assert wait_for(lambda: node.load_torque_extra == 0.05, T)
+    assert wait_for(lambda: node.joints[0].load_torque_extra == 0.05, T)
     assert node.set_parameters([Parameter("drive.bus_voltage", value=12.0)])[0].successful
     for k in range(15):
         send("torque_command", Float64(data=0.3))

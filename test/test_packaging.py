@@ -93,6 +93,42 @@ def test_test_sh_treats_no_collected_tests_as_success():
     assert "collected no tests" in result.stderr
 
 
+def _fresh(code: str) -> str:
+    """Run ``code`` in a new interpreter (this one has imported everything already); its stdout."""
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                            cwd=REPO_ROOT, env={k: v for k, v in os.environ.items() if k != "PYTHONSTARTUP"})
+    assert result.returncode == 0, result.stderr
+    return result.stdout
+
+
+HEAVY = ("numpy", "scipy", "numba", "rclpy", "mcap", "mcap_ros2", "matplotlib", "yaml", "dask")
+
+
+def test_package_face_imports_light_and_without_ros():
+    """``import bldc_actuator`` pulls in no heavy dependency (the face's names import on first use)."""
+    out = _fresh(f"import sys, bldc_actuator; print(sorted(m for m in {HEAVY!r} if m in sys.modules))")
+    assert out.strip() == "[]"
+
+
+def test_package_face_exports_the_public_api_without_ros():
+    """Every exported name resolves (to the object its module defines) without importing rclpy."""
+    out = _fresh("import sys, bldc_actuator as ba\n"
+                 "for n in ba.__all__: getattr(ba, n)\n"
+                 "print('rclpy' in sys.modules)")
+    assert out.strip() == "False"
+    from bldc_actuator import model, params, recording, simulate
+    from bldc_actuator.diagnosis import pipeline
+
+    assert {"Actuator", "BatchActuator", "ActuatorParams", "load_preset", "frames", "simulate_profile",
+            "McapRecorder", "read_recording", "diagnose"} <= set(bldc_actuator.__all__)
+    assert bldc_actuator.Actuator is model.Actuator and bldc_actuator.load_preset is params.load_preset
+    assert bldc_actuator.McapRecorder is recording.McapRecorder and bldc_actuator.diagnose is pipeline.diagnose
+    assert bldc_actuator.simulate_profile is simulate.simulate_profile
+    assert bldc_actuator.frames.__name__ == "bldc_actuator.frames"
+    with pytest.raises(AttributeError, match="no attribute 'no_such_name'"):
+        bldc_actuator.no_such_name  # noqa: B018
+
+
 # ------------------------------------------------------------------------------------------ colcon build
 
 

@@ -33,7 +33,8 @@ import pytest
 from bldc_actuator import params as P
 from bldc_actuator.recording import (
     DEFAULT_CHUNK_SIZE, METADATA_NAME, PARAMETERS_KEY, McapRecorder, RecorderClosedError, RecordingError,
-    as_level, message_definition, parameters_from_recording, qos_yaml, read_recording, summarize, type_hash,
+    as_level, message_definition, parameters_from_recording, qos_yaml, read_raw, read_recording, summarize,
+    type_hash,
 )
 
 REPO = Path(__file__).resolve().parents[1]
@@ -183,6 +184,32 @@ def test_read_recording_gives_back_every_value(reference_file, decoder):
     assert_reference(rec.topics, exp, f"read_recording({decoder})")
     assert rec.start_ns == T0 and rec.end_ns == T0 + (N - 1) * 1_000_000
     assert rec.metadata["node"] == "/actuator_node" and rec.metadata["finalized_by"] == "close()"
+
+
+def test_read_raw_gives_the_cdr_of_every_message(reference_file):
+    """The public undecoded reader (what the diagnosis reads through): per topic, the log times and CDR bytes
+    that deserialise to every reference value (byte equality is not expected: Fast-CDR leaves its alignment
+    padding uninitialised); a topic filter keeps only those messages; ``keep_messages=False`` still counts
+    every message and reads the parameters record."""
+    from rclpy.serialization import deserialize_message
+
+    from bldc_actuator.recording import message_class
+
+    path, exp = reference_file
+    raw = read_raw(path)
+    assert raw.finalized and raw.issues == [] and raw.profile == "ros2"
+    by_topic = {raw.channels[cid].topic: got for cid, got in raw.messages.items()}
+    assert set(by_topic) == set(exp)
+    for topic, items in exp.items():
+        assert [t for t, _ in by_topic[topic]] == [t for t, _ in items]
+        cls = message_class(TYPES[topic])
+        assert [values_of(topic, deserialize_message(d, cls)) for _, d in by_topic[topic]] == [v for _, v in items]
+    only = read_raw(path, topics=["/diagnostics"])
+    assert [only.channels[c].topic for c in only.messages] == ["/diagnostics"]
+    counted = read_raw(path, keep_messages=False)
+    assert counted.messages == {}
+    assert {counted.channels[c].topic: st[0] for c, st in counted.stats.items()} == {t: len(v) for t, v in exp.items()}
+    assert any(name == METADATA_NAME and PARAMETERS_KEY in d for name, d in counted.metadata)
 
 
 def test_byte_field_types_per_decoder(reference_file):

@@ -88,7 +88,7 @@ def test_node_keeps_running_when_the_recording_disk_fills(ros_context, ros_execu
     node = make_node(ros_context, ros_executor, params={
         "node.lock_step": True, "node.record": str(path), "node.watchdog_timeout": 0.0,
         "node.diagnostics_rate": 50.0})
-    node.actuator.set_current_command(3.0)
+    node.plant.set_current_command(node.joints[0].name, 3.0)
     node.advance(300)
     node.recorder.flush()                   # the first 300 periods are a complete chunk on disk
     fail = FailingSink(node.recorder._sink)  # noqa: SLF001
@@ -97,7 +97,7 @@ def test_node_keeps_running_when_the_recording_disk_fills(ros_context, ros_execu
     node.advance(700)                       # must not raise
     assert node.recorder is None and fail.failures == 1
     assert node.t_ns == t_fail + 700 * node.period_ns and node.periods == 1000
-    assert node.actuator.state.omega > 10.0          # still simulating the commanded current
+    assert node.plant.outputs(node.joints[0].name)["omega"] > 10.0          # still simulating the commanded current
     status = node.diagnostic_status()
     assert status.level == ERROR and "recording stopped" in status.message and "No space left" in status.message
     node.close()

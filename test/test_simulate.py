@@ -56,3 +56,40 @@ def test_simulate_bad_arguments_exit_2(tmp_path, capsys):
     assert "no preset named" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["simulate", "--duration", "-1"])
+
+
+def _simulate_csv(tmp_path, name, rows, *extra):
+    src = tmp_path / f"{name}.csv"
+    src.write_text("time,current_command\n" + "".join(f"{t!r},{c!r}\n" for t, c in rows))
+    assert main(["simulate", "--profile", "csv", "--input", str(src), "--out", str(tmp_path / name), "--no-plot",
+                 "--preset", "ak80_9", *extra]) == 0
+    with (tmp_path / f"{name}.csv").open() as fh:
+        data = list(csv.reader(fh))
+    return data[0], np.array(data[1:], dtype=float)
+
+
+def test_simulate_csv_writes_at_the_output_rate_not_at_the_input_rows(tmp_path, capsys):
+    """Issue #16: 4 command rows (a 5 A step held for 0.45 s) and the same steps written as 1001 rows at 1 kHz
+    are the same zero-order-hold command, so the run is the same physics: the same trace at --rate, the same
+    peak current (the loop reaches the 5 A step), not a summary of four samples."""
+    def command(t):
+        return 5.0 if 0.05 <= t < 0.5 else 0.0
+
+    short = [(0.0, 0.0), (0.05, 5.0), (0.5, 0.0), (1.0, 0.0)]
+    dense = [(k / 1000, command(k / 1000)) for k in range(1001)]
+    header, a = _simulate_csv(tmp_path, "short", short)
+    out_short = capsys.readouterr().out
+    _, b = _simulate_csv(tmp_path, "dense", dense)
+    out_dense = capsys.readouterr().out
+    assert a.shape == b.shape == (1001, len(header))          # 1 s at the default --rate 1000 Hz
+    t, i_q = header.index("t [s]"), header.index("i_q [A]")
+    assert np.allclose(a[:, t], np.arange(1001) / 1000.0, atol=1e-12)
+    peak_short, peak_dense = np.max(np.abs(a[:, i_q])), np.max(np.abs(b[:, i_q]))
+    assert peak_short == pytest.approx(peak_dense, rel=1e-6)
+    assert 4.5 < peak_dense < 5.5                              # the PI loop settles on the 5 A command
+    assert np.allclose(a[:, i_q], b[:, i_q], rtol=1e-6, atol=1e-9)
+    peak_line = [line for line in out_short.splitlines() if line.startswith("peak |i_q|")]
+    assert peak_line and peak_line == [line for line in out_dense.splitlines() if line.startswith("peak |i_q|")]
+    # --rate sets the output rate of a csv profile too
+    _, c = _simulate_csv(tmp_path, "slow", short, "--rate", "200")
+    assert len(c) == 201 and np.max(np.abs(c[:, i_q])) == pytest.approx(peak_dense, rel=0.05)

@@ -14,13 +14,14 @@ torque-constant error enters...); selection tries each and keeps the best.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
 import numpy as np
 
-from .. import effects, frames
+from .. import effects, frames, kernel
 
 #: frame factors a torque-constant error is compared with (fitted K / nominal K): every ratio a K_t read in one
 #: frame and entered as another produces, drives on delta motors included (:func:`frames.torque_constant_frame_factors`)
@@ -435,21 +436,35 @@ def params_saturation(coef, cov, keys, variant, ctx):
                               "field": "effects.kt_saturation" if c > 0 else None, "delta": c}}
 
 
-#: angle average of the q-axis dead-time voltage error per V_dt (six-step square waves of the three legs, i_d = 0):
-#: |mean e_q| = 1.5594 V_dt, computed from frames (test_dead_time_voltage_is_compensated_by_the_current_loop)
-DEAD_TIME_Q_FACTOR = 1.5594
+def dead_time_q_factor(winding: str) -> float:
+    """Angle average of the q-axis voltage error the simulator's dead-time term puts against a q-axis current,
+    per V_dt = t_d f_pwm V_bus (i_d = 0), for a ``winding`` of "wye" or "delta": ``-mean e_q`` of
+    :func:`kernel.dead_time_error_dq` over one electrical turn (the same function the simulator applies;
+    √(3/2)·4/π = 1.5594 for wye, √3 times that for delta, where each winding sees the difference of two legs).
+    Midpoint rule on 0.1° cells: the six-step sign changes fall on cell edges, so it is exact to ~1e-7."""
+    if winding not in frames.WINDINGS:
+        raise ValueError(f"winding must be one of {frames.WINDINGS}, got {winding!r}")
+    return _dead_time_q_factor(winding)
+
+
+@functools.lru_cache(maxsize=4)
+def _dead_time_q_factor(winding: str) -> float:
+    th = (np.arange(3600) + 0.5) * (2.0 * math.pi / 3600)
+    e = kernel.dead_time_error_dq(np.full(th.shape, 1j), np.zeros(th.shape, complex), th, 1.0,
+                                  1.0 if winding == "delta" else 0.0, 0.0)
+    return -float(np.mean(e.imag))
 
 
 def params_dead_time(coef, cov, keys, variant, ctx):
     """The sign(i) column's coefficient is the mean q-axis voltage the drive adds against its current,
-    1.5594 t_d f_pwm V_bus: drive.dead_time (wye windings; other windings: reported, not simulated)."""
+    :func:`dead_time_q_factor` (winding) × t_d f_pwm V_bus: drive.dead_time."""
     v = float(coef[0])
     d = ctx.params.drive
-    t_d = v / (DEAD_TIME_Q_FACTOR * d.pwm_frequency * d.bus_voltage)
-    fits = t_d > 0 and ctx.params.motor.winding == "wye"
+    per_td = dead_time_q_factor(ctx.params.motor.winding) * d.pwm_frequency * d.bus_voltage
+    t_d = v / per_td
     return {"dead_time_voltage": {"value": v, "sd": _sd(cov, 0), "unit": "V", "field": None, "delta": v},
-            "dead_time": {"value": t_d, "sd": _sd(cov, 0) / (DEAD_TIME_Q_FACTOR * d.pwm_frequency * d.bus_voltage),
-                          "unit": "s", "field": "drive.dead_time" if fits else None, "delta": t_d}}
+            "dead_time": {"value": t_d, "sd": _sd(cov, 0) / per_td,
+                          "unit": "s", "field": "drive.dead_time" if t_d > 0 else None, "delta": t_d}}
 
 
 def params_delay(coef, cov, keys, variant, ctx):

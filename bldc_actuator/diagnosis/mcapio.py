@@ -317,16 +317,16 @@ def _stamp_ns(msg: Any) -> int | None:
 
 def _mcap_raw(path: Path, topics: set[str] | None):
     """(channels {id: Channel}, schemas {id: Schema}, messages {channel id: [(log_time, bytes)]},
-    metadata [(name, dict)], notes). Uses the fast record scanner of :mod:`bldc_actuator.recording`
-    (it also recovers unfinalized files); falls back to the mcap library."""
+    metadata [(name, dict)], notes). Uses the public raw reader of :mod:`bldc_actuator.recording`
+    (``read_raw``: fast, and it recovers unfinalized files); falls back to the mcap library."""
     notes: list[str] = []
     try:
-        from .. import recording as R
+        from ..recording import read_raw
 
-        scan = R._scan(path, keep_messages=True, topics=topics)  # noqa: SLF001 - see docs/realdata.md
-        notes += [f"recording: {i}" for i in scan.issues]
-        return scan.channels, scan.schemas, scan.messages, list(scan.metadata), notes
-    except (ImportError, AttributeError, TypeError):
+        raw = read_raw(path, topics=topics)
+        notes += [f"recording: {i}" for i in raw.issues]
+        return raw.channels, raw.schemas, raw.messages, list(raw.metadata), notes
+    except ImportError:
         pass
     except Exception as exc:  # noqa: BLE001 - RecordingError and friends
         raise LoadError(f"{path}: {exc}") from None

@@ -11,9 +11,15 @@ Row schema (one row per recording x joint x parameter; :data:`COLUMNS`):
 UTC), ``start_time_source``, ``source`` (``tracked``: the health estimator of :mod:`.health`, every
 recording; ``finding``: a parameter of an effect ``diagnose`` accepted), ``effect``, ``parameter``,
 ``value``, ``uncertainty`` (1 sigma), ``unit``, ``nominal``, ``heldout_before``, ``heldout_after``,
-``heldout_metric``, ``accepted`` (``diagnose`` accepted this effect in this recording), ``status`` (``ok``,
-``not_checkable``, ``not_identifiable``, ``failed``), ``reason``, ``profile`` (the input profile that read the
-file, given or auto-detected), ``params_file``. A log with torque and motion but no current is diagnosed by
+``heldout_metric``, ``accepted`` (``diagnose`` accepted this effect in this recording), ``diagnosis`` (what
+``diagnose`` said about this parameter's effect in this recording: ``accepted: value +- sd``, ``not found: why``
+(tested, no evidence), a verdict such as ``not_identifiable: why``; empty when it did not test it), ``diagnose_value``,
+``diagnose_uncertainty`` (the value +- sd ``diagnose`` fitted for this parameter when it accepted it), ``status`` (``ok``; ``warning``: the value
+stands but the recording has a data issue of :data:`SERIOUS_ISSUES`; ``not_checkable``, ``not_identifiable``,
+``failed``), ``reason``, ``data_issues`` (every data issue of the recording, ``kind channel: detail``, also
+an unfinalized MCAP), ``profile`` (the input profile that read the file, given or auto-detected),
+``params_file``. Exactly one row per recording x joint x parameter: a parameter that is both tracked and a
+parameter of an accepted finding is ONE ``tracked`` row (the finding in ``diagnosis``). A log with torque and motion but no current is diagnosed by
 the torque balance (:mod:`bldc_actuator.diagnosis.torque_balance`); its rows are ``finding`` rows.
 """
 
@@ -30,7 +36,12 @@ from typing import Any
 
 COLUMNS = ("recording", "joint", "actuator_id", "start_time", "start_time_source", "source", "effect",
            "parameter", "value", "uncertainty", "unit", "nominal", "heldout_before", "heldout_after",
-           "heldout_metric", "accepted", "status", "reason", "profile", "params_file")
+           "heldout_metric", "accepted", "diagnosis", "diagnose_value", "diagnose_uncertainty", "status", "reason", "data_issues", "profile", "params_file")
+
+#: DataIssue kinds that make a recording's values less trustworthy: its rows get status ``warning``
+#: (``constant``: a fixed bus voltage or a joint at rest is listed in ``data_issues`` but is no warning)
+SERIOUS_ISSUES = ("outlier", "gap", "duplicate_time", "non_monotonic_time", "unit_suspect", "nan", "clipped",
+                  "unfinalized")
 
 #: environment for worker processes: single-threaded BLAS (the fits are small; threads only contend),
 #: ROS discovery kept on this host
@@ -145,56 +156,134 @@ def _process_joint(job: Job, joint, mapping) -> tuple[list[dict], list[dict]]:
     sig = clean(raw, params=params)
     base = _base_row(job, joint, aid, when.isoformat(), when_src, pf)
     base["profile"] = raw.meta.get("profile") or job.profile or ""      # the input profile that read it
+    issues = data_issues(sig)
+    base["data_issues"] = " | ".join(f"{k} {c}: {d}" for k, c, d in issues)
+    serious = sorted({k for k, _, _ in issues if k in SERIOUS_ISSUES})
     from ..diagnosis import torque_balance
 
-    if torque_balance.applicable(sig):          # torque and motion, no current: the torque balance
+    # ROUTING (duplicated here until diagnosis has one entry point that chooses the route): a log with torque
+    # and motion but no current goes through the torque balance, everything else through the full pipeline
+    if torque_balance.applicable(sig):
         res = torque_balance.diagnose(sig, params, holdout=job.holdout)
-        return _torque_balance_rows(base, res), []
+        return _with_issues(_torque_balance_rows(base, res), serious), []
     from ..diagnosis import equation_error as ee
 
     ctx = ee.prepare([(sig, False)], params, holdout=job.holdout)
     failures = []
-    tracked, findings = [], []
+    tracked, report = [], None
     try:
         tracked = track(sig, params, holdout=job.holdout, ctx=ctx)
     except Exception as exc:  # noqa: BLE001 - the diagnosis may still work
         failures.append(_failure(job, joint, "tracked", exc))
-    accepted: set[str] = set()
     if job.diagnose:
-        from ..diagnosis.pipeline import DiagnoseOptions, diagnose
-
         try:
-            report = diagnose(sig, params, options=DiagnoseOptions(holdout=job.holdout)).to_dict()
-            findings = report.get("findings", [])
-            accepted = {f["effect"] for f in findings}
+            report = _diagnose(sig, params, job.holdout)
         except Exception as exc:  # noqa: BLE001 - the tracked rows stay
             failures.append(_failure(job, joint, "diagnose", exc))
-    rows = []
+    return _with_issues(_rows(base, tracked, report, params), serious), failures
+
+
+def _diagnose(sig, params, holdout: float) -> dict:
+    """The ONE call into the diagnosis pipeline (swap for ``pipeline.diagnose()`` with routing here)."""
+    from ..diagnosis.pipeline import DiagnoseOptions, diagnose
+
+    return diagnose(sig, params, options=DiagnoseOptions(holdout=holdout)).to_dict()
+
+
+def data_issues(sig) -> list[tuple[str, str, str]]:
+    """(kind, channel, detail) of every data issue of a loaded, cleaned recording: the DataIssues, and an
+    MCAP the writer never finalized (the loader's note; kind ``unfinalized``)."""
+    out = [(i.kind, i.channel, f"{i.detail} -> {i.action}" if i.action else i.detail)
+           for i in getattr(sig, "issues", [])]
+    for note in (getattr(sig, "meta", {}) or {}).get("notes", []):
+        if "not finalized" in str(note).lower():
+            out.append(("unfinalized", "file", str(note).replace("recording: ", "", 1)))
+    return out
+
+
+def _with_issues(rows: list[dict], serious: list[str]) -> list[dict]:
+    if not serious:
+        return rows
+    for r in rows:
+        if r.get("status") == "ok":
+            r["status"] = "warning"
+            r["reason"] = "; ".join(x for x in (r.get("reason"), "data issue: " + ", ".join(serious)) if x)
+    return rows
+
+
+def _diagnosis_by_effect(report: dict | None) -> dict[str, str]:
+    """effect -> what diagnose said about it (accepted / rejected / suspected, not identifiable)."""
+    if not report:
+        return {}
+    out: dict[str, str] = {}
+    for r in report.get("rejected", []) or []:
+        e = r.get("effect")
+        if e and e not in out:
+            out[e] = f"{r.get('verdict') or 'not found'}: {r.get('reason') or r.get('form') or ''}".strip(": ")
+    for f in report.get("findings", []) or []:
+        unc = f.get("uncertainty") or {}
+        vals = ", ".join(f"{k} = {_g(v)} ± {_g(unc.get(k))}" for k, v in (f.get("parameters") or {}).items()
+                         if isinstance(v, (int, float)) and not isinstance(v, bool))
+        out[f["effect"]] = f"accepted: {vals}"
+    return out
+
+
+def _g(x) -> str:
+    try:
+        return f"{float(x):.4g}"
+    except (TypeError, ValueError):
+        return "-"
+
+
+def _rows(base: dict, tracked: list, report: dict | None, params) -> list[dict]:
+    """One row per parameter: tracked rows first; a finding's parameter that is tracked folds into it."""
+    said = _diagnosis_by_effect(report)
+    findings = (report or {}).get("findings", []) or []
+    accepted = {f["effect"] for f in findings}
+    fitted = {}                     # parameter -> (value, sd) that diagnose accepted
+    for f in findings:
+        unc = f.get("uncertainty") or {}
+        for name, value in (f.get("parameters") or {}).items():
+            if isinstance(value, (int, float)) and not isinstance(value, bool):
+                fitted.setdefault(name, (_f(value), _f(unc.get(name))))
+    rows, names = [], set()
     for t in tracked:
-        r = dict(base, source="tracked", effect=t.effect, parameter=t.parameter, value=t.value,
-                 uncertainty=t.uncertainty, unit=t.unit, nominal=t.nominal, heldout_before=t.heldout_before,
-                 heldout_after=t.heldout_after, heldout_metric=t.heldout_metric,
-                 accepted=t.effect in accepted, status=t.status, reason=t.reason)
-        rows.append(r)
+        dv, du = fitted.get(t.parameter, (float("nan"), float("nan")))
+        rows.append(dict(base, source="tracked", effect=t.effect, parameter=t.parameter, value=t.value,
+                         uncertainty=t.uncertainty, unit=t.unit, nominal=t.nominal, heldout_before=t.heldout_before,
+                         heldout_after=t.heldout_after, heldout_metric=t.heldout_metric,
+                         accepted=t.effect in accepted, diagnosis=said.get(t.effect, ""), diagnose_value=dv,
+                         diagnose_uncertainty=du, status=t.status, reason=t.reason))
+        names.add(t.parameter)
+    flat = params.to_flat() if params is not None else {}
     for f in findings:
         ho = f.get("held_out") or {}
         units = f.get("units") or {}
         unc = f.get("uncertainty") or {}
+        fields = f.get("fields") or {}
         for name, value in (f.get("parameters") or {}).items():
-            if isinstance(value, (int, float)) and not isinstance(value, bool):
-                rows.append(dict(base, source="finding", effect=f["effect"], parameter=name, value=_f(value),
-                                 uncertainty=_f(unc.get(name)), unit=str(units.get(name, "")), nominal=float("nan"),
-                                 heldout_before=_f(ho.get("before")), heldout_after=_f(ho.get("after")),
-                                 heldout_metric=str(ho.get("metric", "")) + (f" [{ho['unit']}]" if ho.get("unit") else ""),
-                                 accepted=True, status="ok", reason=""))
-    return rows, failures
+            if name in names or not isinstance(value, (int, float)) or isinstance(value, bool):
+                continue
+            names.add(name)
+            nominal = _f(flat.get(fields.get(name))) if fields.get(name) in flat else float("nan")
+            rows.append(dict(base, source="finding", effect=f["effect"], parameter=name, value=_f(value),
+                             uncertainty=_f(unc.get(name)), unit=str(units.get(name, "")), nominal=nominal,
+                             heldout_before=_f(ho.get("before")), heldout_after=_f(ho.get("after")),
+                             heldout_metric=str(ho.get("metric", "")) + (f" [{ho['unit']}]" if ho.get("unit") else ""),
+                             accepted=True, diagnosis=said.get(f["effect"], ""), diagnose_value=_f(value),
+                             diagnose_uncertainty=_f(unc.get(name)), status="ok",
+                             reason="" if fields.get(name) in flat else "no nominal field for this parameter"))
+    return rows
 
 
 def _torque_balance_rows(base: dict, res) -> list[dict]:
-    rows = []
+    rows, seen = [], set()
     for f, accepted in [(f, True) for f in res.findings] + [(f, False) for f in res.rejected if f.parameters]:
         ho = f.held_out
         for name, value in f.parameters.items():
+            if name in seen:          # one row per parameter: an accepted value wins over a rejected form
+                continue
+            seen.add(name)
             rows.append(dict(base, source="finding", effect=f.effect, parameter=name, value=_f(value),
                              uncertainty=_f(f.uncertainty.get(name)), unit=str(f.units.get(name, "")),
                              nominal=float("nan"), heldout_before=_f(ho.get("before")),

@@ -1,4 +1,5 @@
-"""Trend alerts: a tracked parameter whose recent values left that actuator's own baseline.
+"""The SHIFT test (one of the three alert kinds of :mod:`.alerts`): a tracked parameter whose recent values
+left that actuator's own baseline, for series of >= 8 recordings.
 
 Test, per (actuator, parameter) series of tracked values ordered by start time (status ``ok`` only):
 
@@ -77,7 +78,7 @@ def split(n: int, min_baseline: int = MIN_BASELINE, min_recent: int = MIN_RECENT
     return nb, nr
 
 
-def test_series(times: np.ndarray, values: np.ndarray, unc: np.ndarray, *, alpha: float = DEFAULT_ALPHA,
+def shift_test(times: np.ndarray, values: np.ndarray, unc: np.ndarray, *, alpha: float = DEFAULT_ALPHA,
                 min_change: float = 0.0) -> dict[str, Any]:
     """Test one series (times in days, any origin). Returns the statistics and ``alert`` (bool)."""
     order = np.argsort(times, kind="stable")
@@ -122,30 +123,3 @@ def _within_trend(t, v, nb, nr) -> bool:
     s1 = theilslopes(v[:nb], t[:nb])[0] if np.ptp(t[:nb]) > 0 else 0.0
     s2 = theilslopes(v[-nr:], t[-nr:])[0] if np.ptp(t[-nr:]) > 0 else 0.0
     return s1 * s_all > 0 and s2 * s_all > 0 and min(abs(s1), abs(s2)) > 0.3 * abs(s_all)
-
-
-def alerts(rows: list[dict], *, alpha: float = DEFAULT_ALPHA, min_change: float = 0.0) -> dict[str, Any]:
-    """Test every tracked series in the fleet table. Returns ``{"alerts": [...], "tested": [...]}``."""
-    import datetime as dt
-
-    series: dict[tuple[str, str], list[dict]] = {}
-    for r in rows:
-        if r.get("source") != "tracked" or r.get("status") != "ok":
-            continue
-        series.setdefault((r["actuator_id"], r["parameter"]), []).append(r)
-    tested, found = [], []
-    for (aid, par), rs in sorted(series.items()):
-        t = np.array([dt.datetime.fromisoformat(r["start_time"]).timestamp() / 86400.0 for r in rs])
-        v = np.array([float(r["value"]) for r in rs])
-        u = np.array([float(r["uncertainty"]) for r in rs])
-        res = test_series(t, v, u, alpha=alpha, min_change=min_change)
-        rec = {"actuator_id": aid, "parameter": par, "unit": rs[0].get("unit", ""), "effect": rs[0].get("effect", ""),
-               "first": min(r["start_time"] for r in rs), "last": max(r["start_time"] for r in rs), **res}
-        tested.append(rec)
-        if res["alert"]:
-            d = "rose" if res["change"] > 0 else "fell"
-            rec["message"] = (f"{aid}: {par} {d} from {res['baseline_median']:.4g} to {res['recent_median']:.4g} "
-                              f"{rec['unit']} ({100 * res['relative_change']:+.1f} %), z = {res['z']:.1f} > "
-                              f"{res['z_critical']:.2f} (false-alarm rate {alpha:g} per series)")
-            found.append(rec)
-    return {"alerts": found, "tested": tested, "alpha": alpha, "min_change": min_change}
