@@ -41,7 +41,9 @@ ROS_WHEELS = [
     "ros-diagnostic-msgs>=5.5",
     "ros-rosgraph-msgs>=2.3",
 ]
-TEST = [
+# bldc_actuator.mujoco (CoupledSim, export-mujoco): MuJoCo bodies driven by the actuator model; 4.0 has <dcmotor>
+MUJOCO = ["mujoco>=4.0"]
+TEST = MUJOCO + [
     "pytest>=7.0",
     "pytest-timeout>=2.1",
     "pytest-xdist>=3.0",
@@ -57,12 +59,12 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
-        (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml"))),
+        (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml")) + sorted(glob("config/*.xml"))),
         (f"share/{PACKAGE}/config/foxglove", sorted(glob("config/foxglove/*.json"))),
         (f"share/{PACKAGE}/config/input_profiles", sorted(glob("config/input_profiles/*.yaml"))),
     ],
     install_requires=["setuptools"],
-    extras_require={"sim": SIM, "wheels": SIM + ROS_WHEELS, "test": TEST},
+    extras_require={"sim": SIM, "wheels": SIM + ROS_WHEELS, "mujoco": MUJOCO, "test": TEST},
     python_requires=">=3.10",
     zip_safe=True,
     maintainer="bldc_actuator maintainers",

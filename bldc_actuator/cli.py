@@ -18,6 +18,7 @@ SUBCOMMAND_MODULES = (
     "bldc_actuator.record_info",
     "bldc_actuator.diagnosis.cli",
     "bldc_actuator.fleet.cli",
+    "bldc_actuator.mujoco.export",
 )
 
 

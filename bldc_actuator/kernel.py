@@ -64,6 +64,8 @@ STATE_DTYPE = np.dtype([
     ("e_in", np.float64), ("e_joule", np.float64), ("e_visc", np.float64), ("e_fric", np.float64),
     ("e_load", np.float64), ("e_amb", np.float64), ("e_disc", np.float64), ("e_iron", np.float64),
     ("i_fw", np.float64),
+    # prescribed motion (a multibody integrates the mechanics): the rotor speed ramps with the given ``acc``
+    ("prescribed", np.bool_), ("imp_em", np.float64), ("e_em", np.float64),
 ], align=True)
 
 #: ``drive.voltage_limit_mode`` -> the kernel's ``v_lim_mode`` code
@@ -341,7 +343,9 @@ def advance(c, s, h_ns):
     b = c.b + c.fe_e                             # viscous damping + eddy-current iron-loss drag
     den = 2.0 * J / h + b - K * B
     num = 2.0 * J * w0 / h + K * A - tau_other
-    if c.has_friction != 0.0:
+    if s.prescribed:                             # the speed is given: w0 + acc t (a body's, see CoupledSim)
+        w, tau_f = w0 + 0.5 * h * s.acc, 0.0
+    elif c.has_friction != 0.0:
         w, tau_f = friction(c, num, den, w0, h)
     else:
         w = num / den
@@ -385,6 +389,8 @@ def advance(c, s, h_ns):
     s.e_load = s.e_load + tau_other * dth
     s.e_amb = s.e_amb + int_y2 / c.R_ha
     s.e_disc = s.e_disc + (conv_el - conv_mech)
+    s.imp_em = s.imp_em + K * i_mean.imag * h   # ∫ τ_em dt: the interval-mean torque a coupled body receives
+    s.e_em = s.e_em + conv_el                    # ∫ K ω i_q dt: the magnetic work
     # commit
     s.acc = (w1 - w0) / h
     s.i = i1

@@ -25,6 +25,11 @@ Integration over each interval ``h`` between controller ticks (or shorter, when 
 
 So the energy ledger closes to round-off, and trajectories agree across step sizes.
 
+Prescribed motion (:meth:`Actuator.prescribe_motion`, for a multibody that integrates the mechanics, see
+:mod:`bldc_actuator.mujoco`): the mechanical equation is replaced by a given speed ramp ``ω0 + a t``; the
+electrical, drive and thermal equations are the same, and the kernel accumulates the torque impulse ``∫K i_q dt``
+(the mean torque a body receives) and the magnetic work ``∫K ω i_q dt``.
+
 One kernel (:mod:`bldc_actuator.kernel`: :func:`~bldc_actuator.kernel.advance`,
 :func:`~bldc_actuator.kernel.control_tick`, ...) serves both :class:`Actuator` and :class:`BatchActuator`
 (many actuators or parameter sets). It is written once, per actuator, and compiled with numba when numba is
@@ -352,6 +357,35 @@ class _Base:
             for c, s in zip(self._rc, self._rs):
                 kernel.step(c, s, dt_ns)
 
+    def prescribe_motion(self, omega, acc=0.0, theta=None) -> None:
+        """Prescribed-motion mode, for a multibody that integrates the mechanics (:mod:`bldc_actuator.mujoco`):
+        the steps that follow advance the drive, electrical and thermal states with the rotor speed given as
+        ``omega + acc·t`` [rad/s, rad/s², motor side, from now] and the angle ``theta`` [rad] (kept if None);
+        the rotor inertia, damping, friction and load of the parameters are then the body's to apply (the
+        kernel's ledger keeps only the electrical and thermal terms meaningful: :attr:`impulse_em`,
+        :attr:`magnetic_work`). Call it before every body step; :meth:`release_motion` ends the mode."""
+        self._set("omega", omega)
+        self._set("acc", acc)
+        if theta is not None:
+            self._set("theta", theta)
+        self._set("prescribed", True)
+
+    def release_motion(self) -> None:
+        """End :meth:`prescribe_motion`: the actuator's own mechanical equation moves the rotor again."""
+        self._set("prescribed", False)
+
+    @property
+    def impulse_em(self):
+        """∫ τ_em dt since t = 0 [N·m·s, motor side]: its increase over a step divided by the step's length is the
+        step's mean electromagnetic torque (what a coupled body receives)."""
+        return self._get("imp_em")
+
+    @property
+    def magnetic_work(self):
+        """∫ K ω i_q dt since t = 0 [J]: the electrical energy converted to mechanical work (at the speed the
+        kernel saw: its own, or the prescribed one)."""
+        return self._get("e_em")
+
     def _ledger_values(self):
         c, g = self._c, self._get
         return dict(electrical_in=g("e_in"), joule=g("e_joule"), magnetic=0.5 * c.L * abs(g("i")) ** 2,
@@ -552,6 +586,24 @@ class BatchActuator(_Base):
         s("acc", np.zeros(n))
         s("v_mode", False)
 
+    def update_params(self, params: Sequence[ActuatorParams]) -> None:
+        """Replace every element's parameters (same count); the states carry on (see :meth:`Actuator.update_params`)."""
+        params = list(params)
+        if len(params) != len(self):
+            raise ValueError(f"params: expected {len(self)} parameter sets, got {len(params)}")
+        self.params = params
+        self._new_coeffs(params)
+        self._winding = np.array([p.motor.winding for p in params])
+
+    def reset_fault(self, index: int | None = None) -> np.ndarray:
+        """Clear the latched over-temperature trip of element ``index`` (all if None); returns the trip flags
+        as they were."""
+        was = np.asarray(self._get("tripped"), dtype=bool)
+        now = was.copy()
+        now[slice(None) if index is None else index] = False
+        self._set("tripped", now)
+        return was
+
     def field(self, name: str) -> np.ndarray:
         """One raw kernel state field over the batch (a copy): ``i`` (complex ``i_d + j i_q`` [A]),
         ``omega`` [rad/s], ``theta`` [rad], ``T_w``/``T_h`` [°C], ``v``/``z`` (complex [V]), ``i_ref`` [A], ...
@@ -561,7 +613,9 @@ class BatchActuator(_Base):
         return self._get(name)
 
     def set_current_command(self, i_q_ref) -> None:
-        self._set("cmd_q", np.broadcast_to(np.asarray(i_q_ref, dtype=float), (len(self),)))
+        if not (isinstance(i_q_ref, np.ndarray) and i_q_ref.shape == (len(self),)):   # (the coupling's hot path)
+            i_q_ref = np.broadcast_to(np.asarray(i_q_ref, dtype=float), (len(self),))
+        self._set("cmd_q", i_q_ref)
         self._set("v_mode", False)
 
     def set_torque_command(self, tau_out) -> None:

@@ -158,7 +158,12 @@ class ActuatorNode(Node):
         self.done = Future()
         try:
             base, nv, self.preset = NP.declare_all(self)
-            joint_params, explicit = NP.declare_joints(self, base, nv["node.joint_name"])
+            self.mujoco_model = nv[NP.MUJOCO_MODEL]
+            names = NP.joint_names_in_overrides(self) if self.mujoco_model else None
+            joint_params, explicit = NP.declare_joints(self, base, nv["node.joint_name"], names)
+            if self.mujoco_model and not (explicit or names):
+                raise ParameterError(NP.MUJOCO_MODEL, "name the robot's joints the actuators drive: "
+                                     "joints:=[...] or joint.<name>.preset:=...")
         except BaseException:
             self.destroy_node()
             raise
@@ -166,9 +171,14 @@ class ActuatorNode(Node):
         # compile (or load from numba's cache) the physics kernel now, before simulation time is tied to the
         # wall clock: a first step that compiles would otherwise be a slip of seconds
         self.kernel_warm_up_s = warm_up()
-        self.multi = explicit   # joints given: per-joint topics under ~/<joint>/
-        self.plant = ActuatorPlant(joint_params)
+        # joints given (or a robot): per-joint topics under ~/<joint>/
+        self.multi = explicit or bool(self.mujoco_model)
         period_ns = int(round(1e9 / nv["node.publish_rate"]))
+        try:
+            self.plant = self._make_plant(joint_params, period_ns)
+        except BaseException:
+            self.destroy_node()
+            raise
         config = SchedulerConfig(
             period_ns=period_ns, time_factor=nv["node.time_factor"], lock_step=nv["node.lock_step"],
             watchdog_ns=int(round(nv["node.watchdog_timeout"] * 1e9)),
@@ -222,6 +232,11 @@ class ActuatorNode(Node):
         m.position, m.velocity, m.effort = self.scheduler.position, self.scheduler.velocity, self.scheduler.effort
         self.scheduler.share_joint_state(m.position, m.velocity, m.effort)   # (the setters copied them)
         self._m_clock = ClockMsg(clock=self._stamp_now)
+        # a robot model: the whole multibody's state (free base included) at the detail cadence, recorded
+        self.pub_body = None
+        if self.mujoco_model:
+            self.pub_body = self.create_publisher(Float64MultiArray, "~/mujoco/body_state", qos)
+            self._m_body = labelled_layout(Float64MultiArray(), self.plant.body_state_labels())
         self._detail_all = [(k, pub, fill) for k, jt in enumerate(self.topics) for pub, fill in jt.detail()]
         self._detail_live: list = []
         self._next_detail_refresh = 0
@@ -233,6 +248,27 @@ class ActuatorNode(Node):
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         if start:
             self.start()
+
+    def _make_plant(self, joint_params, period_ns: int):
+        """The actuators alone (:class:`ActuatorPlant`) or, with ``mujoco.model``, under the robot's bodies
+        (:class:`bldc_actuator.mujoco.CoupledSim`: MuJoCo integrates the bodies, the joint states are theirs)."""
+        if not self.mujoco_model:
+            return ActuatorPlant(joint_params)
+        try:
+            from .mujoco.coupling import CoupledSim
+        except ModuleNotFoundError as exc:
+            raise ParameterError(NP.MUJOCO_MODEL, f"needs MuJoCo (pip install .[mujoco]): {exc}") from None
+        try:
+            plant = CoupledSim(self.mujoco_model, joint_params)
+        except ValueError as exc:
+            raise ParameterError(NP.MUJOCO_MODEL, str(exc)) from None
+        h_ns = int(round(plant.timestep * 1e9))
+        if period_ns % h_ns:
+            raise ParameterError("node.publish_rate", f"the publish period ({period_ns} ns) must be a whole number "
+                                 f"of the model's body steps (option/timestep {h_ns} ns)")
+        self.get_logger().info(f"mujoco: {self.mujoco_model}, body step {h_ns * 1e-6:g} ms, joints "
+                               f"{', '.join(plant.joints)} coupled (rotor inertia as armature, drive, thermal)")
+        return plant
 
     # ------------------------------------------------------------------------------------ lifecycle
 
@@ -330,6 +366,9 @@ class ActuatorNode(Node):
                     outs = self.plant.all_outputs()
                 for k, pub, fill in self._detail_live:
                     publish(pub, fill(outs[k]), t_ns)
+            if self.pub_body is not None and (self.recorder is not None or self.pub_body.get_subscription_count()):
+                self._m_body.data = self.plant.body_state().tolist()
+                publish(self.pub_body, self._m_body, t_ns)
         if diag:
             self._publish_diagnostics(outs, t_ns)
 
@@ -514,6 +553,8 @@ class ActuatorNode(Node):
                        (j.sub_load, Float64), (j.sub_reset, Empty)]
         if self.pub_clock is not None:
             topics.append((self.pub_clock, ClockMsg))
+        if self.pub_body is not None:
+            topics.append((self.pub_body, Float64MultiArray))
         for ent, mtype in topics:
             self.recorder.add_topic(ent.topic_name, mtype, self._qos)
         self.recorder.add_topic("/parameter_events", ParameterEvent, self._qos)
@@ -540,9 +581,12 @@ are ~/<joint>/...):
   out: node.joint_states_topic (joint_states: every joint), ~/phase_currents, ~/q_axis_state,
        ~/winding_temperature, ~/housing_temperature (per joint, at node.detail_rate, on demand: only while
        subscribed, or recording), /diagnostics (one status per joint; level changes are also logged),
-       /clock (node.publish_clock)
+       /clock (node.publish_clock), ~/mujoco/body_state (with mujoco.model: the whole multibody's qpos and
+       qvel, labelled, at node.detail_rate, on demand)
 
 Per-joint parameters: joint.<name>.preset, joint.<name>.params_file, joint.<name>.<model parameter>.
+A robot: -p mujoco.model:=robot.xml -p joint.knee.preset:=ak80_9 ... drives the MJCF model's joints (MuJoCo
+integrates the bodies; the joints are those named in joint.<name>.*, or joints:=[...]).
 
 Parameters:
 """

@@ -89,6 +89,9 @@ JOINTS = "joints"
 #: per-joint parameters: ``joint.<name>.preset``, ``joint.<name>.params_file``, ``joint.<name>.<model param>``
 JOINT_PREFIX = "joint."
 
+#: an MJCF model whose joints the actuators drive (bldc_actuator.mujoco.CoupledSim); empty = actuators alone
+MUJOCO_MODEL = "mujoco.model"
+
 #: overrides that are neither model nor node parameters but legitimate (ROS itself)
 _FOREIGN_OK_PREFIXES = ("use_sim_time", "qos_overrides.", "start_type_description_service")
 
@@ -210,6 +213,10 @@ def declare_all(node) -> tuple[P.ActuatorParams, dict[str, Any], str]:
     for name, spec in NODE_PARAMS.items():
         value = _declare(node, name, spec.type, spec.default, describe(spec, runtime=spec.runtime), spec.unit)
         node_values[name] = check_node_value(name, value)
+    node_values[MUJOCO_MODEL] = node.declare_parameter(MUJOCO_MODEL, "", ParameterDescriptor(
+        description="MJCF file of a robot: its joints named in joints / joint.<name>.* are driven by the "
+                    "actuators and MuJoCo integrates the bodies (needs the mujoco extra); read-only",
+        read_only=True)).value
     for name in _overrides(node):
         if (node.has_parameter(name) or name.startswith("datasheet.") or name.startswith(_FOREIGN_OK_PREFIXES)
                 or name.startswith(JOINT_PREFIX) or name == JOINTS):
@@ -224,7 +231,18 @@ def declare_all(node) -> tuple[P.ActuatorParams, dict[str, Any], str]:
 
 
 def _known_names() -> list[str]:
-    return [PRESET, JOINTS, *NODE_PARAMS, *P.SPECS]
+    return [PRESET, JOINTS, MUJOCO_MODEL, *NODE_PARAMS, *P.SPECS]
+
+
+def joint_names_in_overrides(node) -> list[str]:
+    """The joint names of the ``joint.<name>.*`` overrides, in the order first given."""
+    names: list[str] = []
+    for key in _overrides(node):
+        if key.startswith(JOINT_PREFIX) and key.count(".") >= 2:
+            name = key.split(".")[1]
+            if name not in names:
+                names.append(name)
+    return names
 
 
 def nearest_hint(name: str, known: list[str]) -> str:
@@ -250,12 +268,14 @@ def check_node_value(name: str, value: Any) -> Any:
     return value
 
 
-def declare_joints(node, base: P.ActuatorParams, default_name: str) -> tuple[dict[str, P.ActuatorParams], bool]:
+def declare_joints(node, base: P.ActuatorParams, default_name: str,
+                   default_names: list[str] | None = None) -> tuple[dict[str, P.ActuatorParams], bool]:
     """Declare ``joints`` and every ``joint.<name>.*`` parameter; return each joint's model parameters in
     ``joints`` order. A joint's parameters: its ``joint.<name>.preset`` or ``joint.<name>.params_file`` (a
     parameter YAML in the node's layout), else the node's own model parameters ``base``; then any
     ``joint.<name>.<model parameter>`` override (e.g. ``joint.knee.drive.bus_voltage``). ``joints`` not given:
-    one joint ``default_name`` with ``base``. Returns ``(params by joint, joints given explicitly)``. Raises
+    the joints ``default_names`` (a robot model's: those named in ``joint.<name>.*``), else one joint
+    ``default_name``, with ``base``. Returns ``(params by joint, joints given explicitly)``. Raises
     :class:`params.ParameterError` naming the parameter."""
     ov = _overrides(node)
     given = ov.get(JOINTS)
@@ -263,7 +283,7 @@ def declare_joints(node, base: P.ActuatorParams, default_name: str) -> tuple[dic
         ov[JOINTS] = Parameter(JOINTS, Parameter.Type.STRING_ARRAY, [given.value])
     explicit = JOINTS in ov
     try:
-        p = node.declare_parameter(JOINTS, [default_name], ParameterDescriptor(
+        p = node.declare_parameter(JOINTS, list(default_names or [default_name]), ParameterDescriptor(
             description="joint names of this node, one simulated actuator each (e.g. [hip, knee, ankle]); "
                         "not given = one joint named node.joint_name with the single-actuator topic names; "
                         "read-only", read_only=True))
