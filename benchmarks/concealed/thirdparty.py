@@ -98,9 +98,16 @@ CASES: tuple[TPCase, ...] = (
     TPCase("tp_coulomb_10khz", ("coulomb_friction",), "Coulomb-like load friction 0.02 N·m, the drive logs every "
            "control sample (10 kHz)", {"coulomb_friction": {"coulomb_friction": 0.02}}, plant={"F_c": 0.02},
            log_rate=10000.0, seed=9),
-    TPCase("tp_viscous_torque_sensor", ("viscous_friction",), "viscous load drag 20 x datasheet, with a shaft torque "
-           "sensor logged", {"viscous_friction": {"viscous_damping": 2.1e-4}}, plant={"B_visc": 2.1e-4},
-           torque_sensor=True, seed=10),
+    TPCase("tp_viscous_torque_sensor", ("viscous_friction",), "viscous drag 20 x datasheet in the motor (bearings, "
+           "seals), with a shaft torque sensor between motor and a known 0.1 N·m load",
+           {"viscous_friction": {"viscous_damping": 2.1e-4}}, plant={"B_visc": 2.1e-4, "tau_ext": 0.1},
+           nominal={"load.load_torque": 0.1}, torque_sensor=True, seed=10),
+    TPCase("tp_dead_time_loaded", ("dead_time",), "inverter dead time 2 µs at 5 kHz PWM, uncompensated, under a known "
+           "0.25 N·m load (|i_q| ~ 3 A, well above the zero-crossing band)", {"dead_time": {"dead_time": 2.0e-6}},
+           plant={"t_d": 2.0e-6, "tau_ext": 0.25}, nominal={"load.load_torque": 0.25}, seed=11, channel="voltage_q"),
+    TPCase("tp_resistance_loaded", ("resistance_error",), "phase resistance 40 % above the nominal, under a known "
+           "0.25 N·m load", {"resistance_error": {"phase_resistance": 0.182}}, plant={"R_s": 0.182, "tau_ext": 0.25},
+           nominal={"load.load_torque": 0.25}, seed=12, channel="voltage_q"),
 )
 
 
@@ -175,7 +182,11 @@ def simulate(case: TPCase, duration: float, seed: int) -> dict:
         w = float(w)
         return b + (F_c * math.tanh(w / F_EPS) / w if abs(w) > 1e-9 else F_c / F_EPS)
 
-    mdl = model.Drive(model.SynchronousMachine(par_true), model.MechanicalSystem(J=J, B_L=B_L),
+    mech = model.MechanicalSystem(J=J, B_L=B_L)
+    tau_ext = P.get("tau_ext", 0.0)       # a constant external load (the user knows it: load.load_torque)
+    if tau_ext:
+        mech.set_external_load_torque(tau_ext)
+    mdl = model.Drive(model.SynchronousMachine(par_true), mech,
                       model.VoltageSourceConverter(u_dc=NOMINAL_BASE["drive.bus_voltage"], t_d=P.get("t_d", 0.0)))
     cfg = sm.CurrentVectorControllerCfg(i_s_max=NOMINAL_BASE["drive.current_limit"] / SQRT3_2,
                                         alpha_c=2 * math.pi * case.drive.get("alpha_c_hz", 500.0), T_s=T_S,
@@ -207,6 +218,7 @@ def simulate(case: TPCase, duration: float, seed: int) -> dict:
         "mdl_theta_m": np.asarray(m.machine.theta_m, dtype=float),
         "mdl_tau_M": np.asarray(m.machine.tau_M, dtype=float),
         "mdl_w_M": np.asarray(m.mechanics.w_M, dtype=float),
+        "tau_ext": np.full(len(t), tau_ext),
         "par": {"n_p": p, "psi_f": par_true.psi_f, "R_s": par_true.R_s, "L_d": par_true.L_d, "L_q": par_true.L_q,
                 "J": J, "b": b, "F_c": F_c},
     }
@@ -247,8 +259,10 @@ def to_recording(run: dict, *, rate: float, seed: int, torque_sensor: bool = Fal
         "voltage_q": u.imag + nz(VOLTAGE_NOISE_Q),
         "voltage_d": u.real + nz(VOLTAGE_NOISE_Q),
     }
-    if torque_sensor:   # shaft sensor between rotor and load: the load's torque (all inertia on the rotor side)
-        rec["torque"] = run["tau_L"][idx] + nz(TORQUE_NOISE)
+    if torque_sensor:
+        # shaft sensor between the motor (its inertia and its drag B_L, bearings and seals) and a massless load: it
+        # reads the external load torque (motulator's tau_L_tot minus the drag B_L(w) w)
+        rec["torque"] = run["tau_ext"][idx] + nz(TORQUE_NOISE)
     rec["true_omega"] = run["w_M"][idx]
     rec["true_tau_M"] = run["tau_M"][idx]
     rec["true_i_q"] = i_m.imag
