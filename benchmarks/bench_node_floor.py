@@ -21,8 +21,9 @@ after a change, side by side under the same load. Each is a fresh process, measu
 the lateness of each message as the subscriber receives it (arrival time minus stamp, minus the run's
 smallest such difference: p50/p99/max; the node's stamps are simulation time, which real time ties to the
 steady clock), and the node's slips as its /diagnostics report them. The ratio node/floor is quoted per
-round (each node run against the floor run next to it) with its spread; a round where either process could not
-keep 1 kHz (slips, or fewer than 990 messages/s) is shown but not counted (a starved process does less work).
+round (each node run against the floor run next to it; with ``--baseline`` also base/floor and node/base) with
+its spread; a ratio whose processes did not both keep 1 kHz (slips, or fewer than 990 messages/s) is shown but
+not counted (a starved process does less work).
 The load average is printed: the machine is shared, so only the ratio of neighbouring runs means much.
 """
 
@@ -254,12 +255,16 @@ def main() -> int:
             f, n, b = by["floor"], by["node"], by.get("base")
             starved = [r["label"] for r in pair if r["slip_reports"] or r["rate"] < 990.0]
             if starved:   # a process that could not keep 1 kHz did less work: its CPU is no measure
-                print(f"  round {k + 1}: {' and '.join(starved)} starved of CPU (slips or < 990 Hz): not counted")
-            else:
+                print(f"  round {k + 1}: {' and '.join(starved)} starved of CPU (slips or < 990 Hz): its ratios "
+                      "not counted")
+            # each ratio of two processes that both kept 1 kHz counts (a starved third does not void it)
+            ok = lambda *rs: all(r is not None and r["label"] not in starved for r in rs)  # noqa: E731
+            if ok(f, n):
                 ratios.append(n["cpu"] / f["cpu"])
-                if b is not None:
-                    base_ratios.append(b["cpu"] / f["cpu"])
-                    node_base.append(n["cpu"] / b["cpu"])
+            if ok(f, b):
+                base_ratios.append(b["cpu"] / f["cpu"])
+            if ok(n, b):
+                node_base.append(n["cpu"] / b["cpu"])
     finally:
         ctl.send_signal(signal.SIGINT)
         try:
@@ -276,12 +281,12 @@ def main() -> int:
           f"node/floor per round: {', '.join(f'{x:.2f}' for x in ratios)} (median {statistics.median(ratios):.2f}, "
           f"range {min(ratios):.2f}-{max(ratios):.2f}); load average at the end {load1[0]:.2f} {load1[1]:.2f} "
           f"{load1[2]:.2f}")
-    if base_ratios:
+    med = lambda xs: f"median {statistics.median(xs):.2f}, range {min(xs):.2f}-{max(xs):.2f}" if xs else "none"  # noqa: E731
+    if base_dir:
         bs = [r["cpu"] for r in rows if r["label"] == "base"]
         print(f"base CPU {min(bs) * 100:.1f}-{max(bs) * 100:.1f} %; base/floor per round: "
-              f"{', '.join(f'{x:.2f}' for x in base_ratios)} (median {statistics.median(base_ratios):.2f}, range "
-              f"{min(base_ratios):.2f}-{max(base_ratios):.2f}); node/base per round: "
-              f"{', '.join(f'{x:.2f}' for x in node_base)} (median {statistics.median(node_base):.2f})")
+              f"{', '.join(f'{x:.2f}' for x in base_ratios)} ({med(base_ratios)}); node/base per round: "
+              f"{', '.join(f'{x:.2f}' for x in node_base)} ({med(node_base)})")
     return 0
 
 
