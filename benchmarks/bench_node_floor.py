@@ -3,6 +3,7 @@
 
     .venv/bin/python benchmarks/bench_node_floor.py [--joints 12] [--seconds 10] [--rounds 3]
                                                     [--node-arg -p --node-arg node.detail_rate:=100.0]
+                                                    [--baseline DIR]
 
 Conditions (what a user has under ros2_control): a controller in ANOTHER process sends ``~/commands`` (one
 effort per joint) at ``--command-rate`` (1 kHz), and a subscriber in a third process listens to
@@ -13,13 +14,16 @@ alternates ``--rounds`` times between
   the same executor and spin loop, no physics (what any rclpy node with this contract costs), and
 * ``actuator_node`` with ``--joints`` ak80_9 joints and its defaults (plus ``--node-arg`` extras),
 
-each a fresh process, measured after ``--warmup`` seconds for ``--seconds``: CPU of the process from
+and, with ``--baseline DIR`` (a source checkout of another commit, e.g. made by ``git worktree add``), the
+same ``actuator_node`` from that checkout ("base", its ``bldc_actuator`` first on ``PYTHONPATH``): before and
+after a change, side by side under the same load. Each is a fresh process, measured after ``--warmup`` seconds for ``--seconds``: CPU of the process from
 ``/proc/<pid>/stat`` (utime + stime, all threads: executor and DDS) per wall second, the JointState rate and
 the lateness of each message as the subscriber receives it (arrival time minus stamp, minus the run's
 smallest such difference: p50/p99/max; the node's stamps are simulation time, which real time ties to the
 steady clock), and the node's slips as its /diagnostics report them. The ratio node/floor is quoted per
-round (each node run against the floor run next to it) with its spread; a round where either process could not
-keep 1 kHz (slips, or fewer than 990 messages/s) is shown but not counted (a starved process does less work).
+round (each node run against the floor run next to it; with ``--baseline`` also base/floor and node/base) with
+its spread; a ratio whose processes did not both keep 1 kHz (slips, or fewer than 990 messages/s) is shown but
+not counted (a starved process does less work).
 The load average is printed: the machine is shared, so only the ratio of neighbouring runs means much.
 """
 
@@ -143,10 +147,12 @@ def niced(args):
     return lambda: os.setpriority(os.PRIO_PROCESS, 0, args.nice)
 
 
-def measure(cmd: list[str], label: str, args) -> dict:
+def measure(cmd: list[str], label: str, args, pythonpath: str | None = None) -> dict:
     env = child_env()
+    if pythonpath:
+        env["PYTHONPATH"] = pythonpath + os.pathsep + env.get("PYTHONPATH", "")
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            preexec_fn=niced(args))
+                            preexec_fn=niced(args), cwd=pythonpath)   # (python -c puts its cwd first on sys.path)
     t_start = time.monotonic() + args.warmup
     t_stop = t_start + args.seconds
     sub = subprocess.Popen([sys.executable, "-c", SUBSCRIBER, repr(t_start), repr(t_stop)], env=env,
@@ -206,6 +212,8 @@ def main() -> int:
                     "starving them")
     ap.add_argument("--threads", action="store_true", help="print each process's CPU per thread")
     ap.add_argument("--show-log", action="store_true", help="print the node's console output")
+    ap.add_argument("--baseline", metavar="DIR", help="a source checkout of another commit: its actuator_node runs "
+                    "too in every round (label base), for before/after figures under the same load")
     args = ap.parse_args()
     args.py_spy_done = False
     env = child_env()
@@ -213,19 +221,25 @@ def main() -> int:
                            preexec_fn=niced(args))
     floor_cmd = [sys.executable, str(HERE / "floor_node.py"), "--joints", str(args.joints)]
     node_cmd = node_command(args.joints, args.node_arg)
+    base_dir = None
+    if args.baseline:
+        base_dir = str(Path(args.baseline).resolve())
+        if not (Path(base_dir) / "bldc_actuator" / "node.py").is_file():
+            ap.error(f"--baseline: expected a source checkout with bldc_actuator/node.py, got {args.baseline}")
     load0 = os.getloadavg()
     print(f"bench_node_floor: {os.cpu_count()} CPUs, load average {load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}; "
           f"{args.joints} joints (ak80_9), controller process at {args.command_rate:g} Hz on ~/commands, subscriber "
           f"process on joint_states + /diagnostics; EventsExecutor; {args.rounds} rounds of floor/node, "
           f"{args.seconds:g} s each after {args.warmup:g} s warm-up; node extras: {' '.join(args.node_arg) or 'none'}; "
-          f"nice {args.nice}")
-    rows, ratios = [], []
+          f"nice {args.nice}" + (f"; baseline {base_dir}" if base_dir else ""))
+    rows, ratios, base_ratios, node_base = [], [], [], []
     try:
         for k in range(args.rounds):
-            order = [(floor_cmd, "floor"), (node_cmd, "node")]
-            if k % 2:   # alternate the order: neither always runs first after the other's exit
-                order.reverse()
-            pair = [measure(cmd, label, args) for cmd, label in order]
+            order = [(floor_cmd, "floor", None), (node_cmd, "node", None)]
+            if base_dir:
+                order.append((node_cmd, "base", base_dir))
+            order = order[k % len(order):] + order[:k % len(order)]   # rotate: none always runs first
+            pair = [measure(cmd, label, args, path) for cmd, label, path in order]
             for r in pair:
                 rows.append(r)
                 print(f"  round {k + 1} {r['label']:<5} CPU {r['cpu'] * 100:5.1f} % of a core   rate "
@@ -235,14 +249,22 @@ def main() -> int:
                 if args.threads:
                     print("    threads: " + ", ".join(f"{k} {v * 100:.1f} %" for k, v in
                                                       sorted(r["threads"].items(), key=lambda kv: -kv[1])))
-                if args.show_log and r["label"] == "node":
+                if args.show_log and r["label"] != "floor":
                     print("    " + r["log"].strip().replace("\n", "\n    "))
-            f, n = (pair[0], pair[1]) if pair[0]["label"] == "floor" else (pair[1], pair[0])
-            starved = [r["label"] for r in (f, n) if r["slip_reports"] or r["rate"] < 990.0]
+            by = {r["label"]: r for r in pair}
+            f, n, b = by["floor"], by["node"], by.get("base")
+            starved = [r["label"] for r in pair if r["slip_reports"] or r["rate"] < 990.0]
             if starved:   # a process that could not keep 1 kHz did less work: its CPU is no measure
-                print(f"  round {k + 1}: {' and '.join(starved)} starved of CPU (slips or < 990 Hz): not counted")
-            else:
+                print(f"  round {k + 1}: {' and '.join(starved)} starved of CPU (slips or < 990 Hz): its ratios "
+                      "not counted")
+            # each ratio of two processes that both kept 1 kHz counts (a starved third does not void it)
+            ok = lambda *rs: all(r is not None and r["label"] not in starved for r in rs)  # noqa: E731
+            if ok(f, n):
                 ratios.append(n["cpu"] / f["cpu"])
+            if ok(f, b):
+                base_ratios.append(b["cpu"] / f["cpu"])
+            if ok(n, b):
+                node_base.append(n["cpu"] / b["cpu"])
     finally:
         ctl.send_signal(signal.SIGINT)
         try:
@@ -259,6 +281,12 @@ def main() -> int:
           f"node/floor per round: {', '.join(f'{x:.2f}' for x in ratios)} (median {statistics.median(ratios):.2f}, "
           f"range {min(ratios):.2f}-{max(ratios):.2f}); load average at the end {load1[0]:.2f} {load1[1]:.2f} "
           f"{load1[2]:.2f}")
+    med = lambda xs: f"median {statistics.median(xs):.2f}, range {min(xs):.2f}-{max(xs):.2f}" if xs else "none"  # noqa: E731
+    if base_dir:
+        bs = [r["cpu"] for r in rows if r["label"] == "base"]
+        print(f"base CPU {min(bs) * 100:.1f}-{max(bs) * 100:.1f} %; base/floor per round: "
+              f"{', '.join(f'{x:.2f}' for x in base_ratios)} ({med(base_ratios)}); node/base per round: "
+              f"{', '.join(f'{x:.2f}' for x in node_base)} ({med(node_base)})")
     return 0
 
 

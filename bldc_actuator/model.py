@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import cmath
 import math
+import struct
 from collections import namedtuple
 from dataclasses import dataclass, fields
 from types import SimpleNamespace
@@ -286,6 +287,23 @@ class EnergyLedger:
 _StateView = namedtuple("_StateView", STATE_DTYPE.names)
 
 
+def _joint_state_struct() -> struct.Struct:
+    """Reads ``(i_q, omega, theta, T_h, v_d, v_q)`` straight from one state record's bytes (numpy's
+    ``record.item()`` converts all ~25 fields: ten times the cost, and the node reads 12 joints every period)."""
+    at = {name: STATE_DTYPE.fields[name][1] for name in ("i", "omega", "theta", "T_h", "v")}
+    offsets = [at["i"] + 8, at["omega"], at["theta"], at["T_h"], at["v"], at["v"] + 8]   # (complex: re, im)
+    if offsets != sorted(offsets) or STATE_DTYPE.byteorder not in "=|":
+        raise AssertionError("kernel.STATE_DTYPE layout changed: update model._joint_state_struct")
+    fmt, pos = "=", 0
+    for off in offsets:
+        fmt += (f"{off - pos}x" if off > pos else "") + "d"
+        pos = off + 8
+    return struct.Struct(fmt)
+
+
+_JOINT_STATE = _joint_state_struct()
+
+
 def _seconds_to_ns(dt: float) -> int:
     if not (dt >= 0.0 and math.isfinite(dt)):
         raise ValueError(f"dt: expected a finite duration >= 0 s, got {dt!r}")
@@ -501,6 +519,20 @@ class Actuator(_Base):
         """Everything a driver or the node publishes, derived from the state."""
         return _outputs(self._c, self._view(), self.params.motor.winding, _ScalarOps)
 
+    def joint_state(self) -> tuple[float, float, float, bool]:
+        """``(position_out [rad], velocity_out [rad/s], effort_out [N*m], voltage_saturated)``: the same
+        numbers as those keys of :meth:`outputs` (same formulas), for a fraction of its cost (a node
+        publishing joint states every period needs nothing else)."""
+        c = self._c
+        if self._rs is None:
+            i_q, omega, theta, T_h, v_d, v_q = _JOINT_STATE.unpack_from(self._ss)
+            v = complex(v_d, v_q)
+        else:
+            r = self._rs[0]
+            i_q, omega, theta, T_h, v = r.i.imag, r.omega, r.theta, r.T_h, r.v
+        return (theta / c.N, omega / c.N, _torque_constant_q(c, i_q, T_h) * i_q * c.N,
+                _voltage_saturated(c, abs(v)))
+
     def run(self, profile, *, record_every: float | None = None) -> "SimResult":
         """Run a command profile (see :mod:`bldc_actuator.profiles`) and return every signal."""
         from .profiles import run_profile
@@ -508,14 +540,26 @@ class Actuator(_Base):
         return run_profile(self, profile, record_every=record_every)
 
 
+def _torque_constant_q(c: _Coeffs, i_q, T_h):
+    """K_t_q [N*m/A] at the magnet temperature and (with ``effects.kt_saturation``) the current: the one
+    formula behind ``torque_em``/``effort_out`` of :meth:`Actuator.outputs` and :meth:`Actuator.joint_state`."""
+    K = c.K_ref * effects.flux_factor(T_h, c.T_ref, c.beta)
+    if c.batch or c.k_sat:
+        K = K * (effects.saturation_factor if c.batch else kernel._saturation_factor)(i_q, c.k_sat)  # noqa: SLF001
+    return K
+
+
+def _voltage_saturated(c: _Coeffs, v_magnitude_q):
+    """Whether the drive's voltage is on the inverter's limit circle (``voltage_saturated``)."""
+    return v_magnitude_q >= c.V_max * (1.0 - 1e-9)
+
+
 def _outputs(c: _Coeffs, s, winding, ops) -> dict[str, Any]:
     i_d, i_q = s.i.real, s.i.imag
     v_d, v_q = s.v.real, s.v.imag
     # the same effects functions as the kernel; for one actuator their compiled forms (numpy ufuncs on Python
     # floats cost ~1 µs each, and the node calls this every period)
-    K = c.K_ref * effects.flux_factor(s.T_h, c.T_ref, c.beta)
-    if c.batch or c.k_sat:
-        K = K * (effects.saturation_factor if c.batch else kernel._saturation_factor)(i_q, c.k_sat)  # noqa: SLF001
+    K = _torque_constant_q(c, i_q, s.T_h)
     theta_e = c.pole_pairs * s.theta
     i_a, i_b, i_c = frames.dq_to_abc(i_d, i_q, theta_e)
     i_A, i_B, i_C = frames.phase_to_line_current(i_a, i_b, i_c, winding)
@@ -530,7 +574,7 @@ def _outputs(c: _Coeffs, s, winding, ops) -> dict[str, Any]:
         "t": s.t_ns * 1e-9,
         "i_d": i_d, "i_q": i_q, "i_q_ref": s.i_ref, "v_d": v_d, "v_q": v_q,
         "v_limit_q": c.V_max, "v_magnitude_q": v_mag, "bus_voltage": c.V_bus,
-        "voltage_saturated": v_mag >= c.V_max * (1.0 - 1e-9),
+        "voltage_saturated": _voltage_saturated(c, v_mag),
         "omega": s.omega, "theta": s.theta,
         "position_out": s.theta / c.N, "velocity_out": s.omega / c.N,
         "torque_em": K * i_q, "effort_out": K * i_q * c.N,

@@ -36,8 +36,9 @@ Optional
                                                    voltage_saturated)`` of every joint in ``joints`` order:
                                                    all the scheduler needs on a period without diagnostics or
                                                    wanted detail topics. Offer it only if it is cheaper than
-                                                   ``all_outputs()`` (the default plant does not: the public
-                                                   Actuator API has no cheaper read than ``outputs()``)
+                                                   ``all_outputs()`` (the default plant's is
+                                                   :meth:`bldc_actuator.model.Actuator.joint_state`, the same
+                                                   numbers as ``outputs()`` for a fraction of the cost)
 
 Units are SI at this boundary (A, N*m, rad, s, ns for time); commands are finite floats (the scheduler
 rejects anything else before it reaches the plant).
@@ -99,6 +100,7 @@ class ActuatorPlant:
         self._list = list(self._acts.values())
         self._steps = [a.step_ns for a in self._list]
         self._outs = [a.outputs for a in self._list]
+        self._states = [a.joint_state for a in self._list]
 
     @property
     def joints(self) -> list[str]:
@@ -130,6 +132,9 @@ class ActuatorPlant:
 
     def all_outputs(self) -> list[dict]:
         return [out() for out in self._outs]
+
+    def joint_states(self) -> list[tuple[float, float, float, bool]]:
+        return [state() for state in self._states]
 
     def params(self, joint: str) -> ActuatorParams:
         return self._acts[joint].params

@@ -530,3 +530,31 @@ def test_dead_time_voltage_is_compensated_by_the_current_loop():
     a, b, c = frames.dq_to_abc(0.0, 1.0, grid)
     assert -np.mean(frames.abc_to_dq(-np.sign(a), -np.sign(b), -np.sign(c), grid)[1]) == pytest.approx(
         dead_time_q_factor("wye"), rel=1e-4)      # delta windings: test_dead_time.py
+
+
+def test_joint_state_read_equals_outputs_exactly():
+    """Actuator.joint_state() (the node's per-period read) gives exactly the position, velocity, effort and
+    voltage saturation of outputs(), for 12 differently configured joints over a run that takes them through
+    voltage saturation, magnet-temperature and K_t saturation, thermal derating and a trip."""
+    base = make(**{"motor.magnet_temperature_enabled": True, "thermal.winding_heat_capacity": 0.2,
+                   "drive.derate_temperature": 30.0, "drive.trip_temperature": 45.0, "drive.current_limit": 30.0,
+                   "motor.viscous_damping": 1e-4})
+    acts = [Actuator(base.replace(**{"effects.kt_saturation": 0.01 * (k % 3), "gear.gear_ratio": 1.0 + k,
+                                     "drive.bus_voltage": 12.0 + 4.0 * k,
+                                     "thermal.initial_housing_temperature": 25.0 + 5.0 * k}))
+                for k in range(12)]
+    seen = {"saturated": 0, "derated": 0, "tripped": 0}
+    for n in range(400):
+        for k, act in enumerate(acts):
+            if n % 50 == 0:
+                act.set_current_command((25.0 - k) * (1 if n % 100 else -1))
+            act.step_ns(1_000_000 + 37 * k)
+            o = act.outputs()
+            state = act.joint_state()
+            assert state == (o["position_out"], o["velocity_out"], o["effort_out"], o["voltage_saturated"])
+            assert type(state[3]) is type(o["voltage_saturated"])
+            seen["saturated"] += bool(o["voltage_saturated"])
+            seen["derated"] += o["current_limit_effective"] < 30.0 and not o["tripped"]
+            seen["tripped"] += bool(o["tripped"])
+    assert all(v > 0 for v in seen.values()), seen
+    assert len({a.joint_state()[2] for a in acts}) == 12     # a read per joint, not one joint's numbers

@@ -162,8 +162,8 @@ def test_command_contract_and_per_reason_log_throttling():
     assert all(x.level == WARN for x in h.values())     # the wrong-length array concerns every joint
 
 
-class CheapReadPlant(ActuatorPlant):
-    """The default plant with the optional ``joint_states()`` read, counting full reads."""
+class CountingPlant(ActuatorPlant):
+    """The default plant (with its cheap ``joint_states()`` read), counting full reads."""
 
     full_reads = 0
 
@@ -171,25 +171,30 @@ class CheapReadPlant(ActuatorPlant):
         self.full_reads += 1
         return super().all_outputs()
 
-    def joint_states(self):
-        return [(o["position_out"], o["velocity_out"], o["effort_out"], o["voltage_saturated"])
-                for o in (self.outputs(j) for j in self.joints)]
+
+class FullReadPlant(ActuatorPlant):
+    """The default plant without the optional cheap read: every period reads ``all_outputs()``."""
+
+    joint_states = None
 
 
 def test_a_plant_with_a_cheap_joint_state_read_is_fully_read_only_when_needed():
     """Same joint states and saturation counts as the full read; all_outputs() only on diagnostics periods
     (and detail periods while details are wanted)."""
     cfg = dict(lock_step=True, watchdog_ns=0, diag_period_ns=10_000_000)
-    cheap = Scheduler(CheapReadPlant({"a": load_preset("ak80_9")}), SchedulerConfig(**cfg), log=ListLog(),
+    cheap = Scheduler(CountingPlant({"a": load_preset("ak80_9")}), SchedulerConfig(**cfg), log=ListLog(),
                       clock=FakeClock())
-    full, _, _ = make(joints=("a",), **cfg)
+    full = Scheduler(FullReadPlant({"a": load_preset("ak80_9")}), SchedulerConfig(**cfg), log=ListLog(),
+                     clock=FakeClock())
     cheap.detail_wanted = False
     reads0 = cheap.plant.full_reads
     for s in (cheap, full):
         s.command(s.joints[0], "current", s.plant.params("a").drive.current_limit, "~/current_command")
-        s.advance(300)                                           # runs into the voltage limit: saturates
-    assert (cheap.position[0], cheap.velocity[0], cheap.effort[0]) == (full.position[0], full.velocity[0],
-                                                                       full.effort[0])
+    for _ in range(300):                                         # runs into the voltage limit: saturates
+        for s in (cheap, full):
+            s.advance(1)
+        assert (cheap.position[0], cheap.velocity[0], cheap.effort[0]) == (full.position[0], full.velocity[0],
+                                                                           full.effort[0])
     assert cheap.plant.full_reads - reads0 == 31                 # t = 1 (first diagnostics), 10, 20, ..., 300 ms
     assert cheap.joints[0].win_saturated == full.joints[0].win_saturated > 0
     cheap.detail_wanted = True
