@@ -4,6 +4,7 @@
     .venv/bin/python benchmarks/run_concealed.py            # all cases
     .venv/bin/python benchmarks/run_concealed.py --quick    # the small subset the test runs
     .venv/bin/python benchmarks/run_concealed.py --cases coulomb null_mixed --regenerate
+    .venv-peers/bin/python benchmarks/run_concealed.py --set thirdparty   # truth: motulator (peers venv)
 
 1. generates every case with the independent truth simulator (``benchmarks/concealed``): training and
    held-out CSV, the nominal parameter file, the truth JSON — cached under ``--data`` and regenerated only
@@ -38,19 +39,25 @@ from benchmarks.concealed import scoring  # noqa: E402
 GENERATOR_SOURCES = ("truth.py", "truth_kernel.c", "excitation.py", "cases.py", "oracle.py")
 
 
-def generator_hash() -> str:
+def generator_hash(case_set: str = "builtin") -> str:
     h = hashlib.sha256()
-    for name in GENERATOR_SOURCES:
-        h.update((REPO / "benchmarks" / "concealed" / name).read_bytes())
+    if case_set == "thirdparty":
+        from benchmarks.concealed import thirdparty
+
+        h.update((REPO / "benchmarks" / "concealed" / "thirdparty.py").read_bytes())
+        h.update(thirdparty.motulator_version().encode())
+    else:
+        for name in GENERATOR_SOURCES:
+            h.update((REPO / "benchmarks" / "concealed" / name).read_bytes())
     import numpy
 
     h.update(numpy.__version__.encode())
     return h.hexdigest()[:16]
 
 
-def ensure_data(cases, data_dir: Path, regenerate: bool, log) -> dict[str, dict]:
+def ensure_data(cases, data_dir: Path, regenerate: bool, log, case_set: str = "builtin") -> dict[str, dict]:
     """Generate the cases whose files are missing or stale; return their truth dicts."""
-    stamp = generator_hash()
+    stamp = generator_hash(case_set)
     todo = []
     for case in cases:
         d = data_dir / case.name
@@ -61,14 +68,19 @@ def ensure_data(cases, data_dir: Path, regenerate: bool, log) -> dict[str, dict]
     if todo:
         log(f"generating {len(todo)} case(s) with the truth simulator -> {data_dir}")
         t0 = time.perf_counter()
-        made = C.generate(todo, data_dir, progress=lambda m: log("  " + m))
+        if case_set == "thirdparty":
+            from benchmarks.concealed import thirdparty
+
+            made = thirdparty.generate(todo, data_dir, progress=lambda m: log("  " + m))
+        else:
+            made = C.generate(todo, data_dir, progress=lambda m: log("  " + m))
         for case in todo:
             (data_dir / case.name / ".generator").write_text(stamp)
         log(f"  generated in {time.perf_counter() - t0:.1f} s (wall); simulation time per case, summed over its "
             f"recordings (training, held-out, twins):")
         for case in todo:
             t = made[case.name]
-            log(f"    {case.name:28s} {t.get('generation_seconds', float('nan')):6.1f} s  "
+            log(f"    {case.name:28s} {t.get('generation_seconds', float('nan')):6.1f} s  "  # (builtin set only)
                 f"({t['train']['duration_s']:.0f} s + {t['heldout']['duration_s']:.0f} s recorded, "
                 f"log {t['log'].get('rate', 1000.0):g} Hz)")
     else:
@@ -144,6 +156,10 @@ def concealment_table(cases, truths) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--set", dest="case_set", choices=("builtin", "thirdparty"), default="builtin",
+                    help="builtin: the project's own truth simulator (benchmarks/concealed/truth.py); thirdparty: "
+                         "motulator's PMSM drive as the truth (benchmarks/concealed/thirdparty.py; run in the peers "
+                         "venv, bash benchmarks/peers/setup.sh)")
     ap.add_argument("--cases", nargs="*", help="case names (default: all)")
     ap.add_argument("--quick", action="store_true", help="only the fast subset (also run by test/test_concealed.py)")
     ap.add_argument("--seed-offset", type=int, default=0,
@@ -166,16 +182,21 @@ def main(argv=None) -> int:
     def log(msg):
         print(msg, flush=True)
 
-    cases = list(C.CASES)
+    if args.case_set == "thirdparty":
+        from benchmarks.concealed import thirdparty as S
+    else:
+        S = C
+    cases = list(S.CASES)
     if args.quick:
-        cases = [c for c in cases if c.quick]
+        cases = [c for c in cases if getattr(c, "quick", False)]
     if args.cases:
-        cases = [C.get_case(n) for n in args.cases]
-    cases = [C.reseeded(c, args.seed_offset) for c in cases]
+        cases = [S.get_case(n) for n in args.cases]
+    cases = [S.reseeded(c, args.seed_offset) for c in cases]
+    set_stem = "concealed" if args.case_set == "builtin" else "thirdparty"
     if args.data is None:
-        args.data = REPO / "benchmarks" / ".cache" / ("concealed" + (f"-seeds{args.seed_offset}" if args.seed_offset else ""))
+        args.data = REPO / "benchmarks" / ".cache" / (set_stem + (f"-seeds{args.seed_offset}" if args.seed_offset else ""))
     t_start = time.perf_counter()
-    truths = ensure_data(cases, args.data, args.regenerate, log)
+    truths = ensure_data(cases, args.data, args.regenerate, log, args.case_set)
     log("\nconcealment (training recording; effect = full − effect-free twin, noise = full − ideal-sensor twin):")
     log(concealment_table(cases, truths))
     if args.generate_only:
@@ -206,15 +227,17 @@ def main(argv=None) -> int:
     log(f"\ntotal {time.perf_counter() - t_start:.0f} s")
 
     args.out.mkdir(parents=True, exist_ok=True)
-    stem = "concealed" + (f"-seeds{args.seed_offset}" if args.seed_offset else "") + ("-quick" if args.quick else "")
-    meta = {"generator": generator_hash(), "python": platform.python_version(), "machine": platform.machine(),
+    stem = set_stem + (f"-seeds{args.seed_offset}" if args.seed_offset else "") + ("-quick" if args.quick else "")
+    meta = {"generator": generator_hash(args.case_set), "set": args.case_set,
+            "python": platform.python_version(), "machine": platform.machine(),
             "cpus": os.cpu_count(), "date": time.strftime("%Y-%m-%d %H:%M:%S"),
             "git": _git_head(), "heldout_option": held, "quick": args.quick, "seed_offset": args.seed_offset}
     (args.out / f"{stem}.json").write_text(json.dumps(
         {"meta": meta, "summary": summary, "cases": [s.to_dict() for s in scores],
          "truth": {n: {k: v for k, v in t.items() if k != "ranges"} for n, t in truths.items()}},
         indent=2, default=float) + "\n")
-    md = ["# Concealed-effect benchmark: results", "",
+    md = ["# Concealed-effect benchmark: results" + (" (third-party truth: motulator)" if args.case_set == "thirdparty"
+                                                     else ""), "",
           f"Generated by `benchmarks/run_concealed.py` ({meta['date']}, git {meta['git']}, generator {meta['generator']}).",
           "Method: docs/benchmark.md.", "", "## Summary", "", "```", scoring.summary_text(summary), "```", "",
           "## Cases", "", scoring.markdown_table(scores, truths), "", "## Concealment", "", "```",
@@ -229,15 +252,17 @@ def main(argv=None) -> int:
         md.append("")
     (args.out / f"{stem}.md").write_text("\n".join(md))
     if args.update_doc:
-        update_doc(args.update_doc, meta, summary, scores, truths, cases)
+        update_doc(args.update_doc, meta, summary, scores, truths, cases,
+                   *((TP_BEGIN, TP_END) if args.case_set == "thirdparty" else (BEGIN, END)))
     log(f"wrote {args.out / (stem + '.md')} and {args.out / (stem + '.json')}")
     return 1 if failed else 0
 
 
 BEGIN, END = "<!-- concealed-results:begin -->", "<!-- concealed-results:end -->"
+TP_BEGIN, TP_END = "<!-- thirdparty-results:begin -->", "<!-- thirdparty-results:end -->"
 
 
-def update_doc(path: Path, meta, summary, scores, truths, cases) -> None:
+def update_doc(path: Path, meta, summary, scores, truths, cases, BEGIN=BEGIN, END=END) -> None:
     """Replace the block between the markers of ``path`` with the latest summary, table and concealment."""
     text = path.read_text()
     if BEGIN not in text or END not in text:
