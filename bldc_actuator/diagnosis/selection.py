@@ -293,7 +293,8 @@ def _gate(ctx: Context, cand: Candidate, best: Evaluation, base: Fit, weights, g
         best.undecided = True
         best.reason = (f"not decidable: held-out too short (the effect excites {ho['effective_chunks']:.1f} of "
                        f"{ho['chunks']} chunks of {ho['chunk_s']:.2g} s; held-out -{100 * ho['rel']:.2f}% RMS, "
-                       f"t = {ho['t']:.1f} <= {ho['t_crit']:.2f} needed there, ΔBIC {best.dbic:.1f}); record a "
+                       f"t = {ho['t']:.1f}, " + (f"<= {ho['t_crit']:.2f} needed there" if math.isfinite(ho['t_crit'])
+                                                else "a test needs >= 4") + f", ΔBIC {best.dbic:.1f}); record a "
                        f"longer held-out part with more varied motion")
     elif ho["t"] <= ho["t_crit"]:
         best.reason = (f"held-out improvement {100 * ho['rel']:.2f}% not significant "
@@ -424,6 +425,9 @@ def forward_select(ctx: Context, loc: dict, lib: dict[str, Candidate], names: li
         weights = _weights(ctx, win.fit)
         base = fit_model(ctx, cols, keys, weights, iterating)
         last_eval.pop(win.effect, None)
+    for name, e in last_eval.items():
+        if e.undecided:     # what the user must notice: a large effect this held-out part cannot decide
+            say(f"{name} ({e.variant.label}): {e.reason}")
     # backward check: every accepted effect must still earn its place given the others, and its parameters
     # must stay physical in the joint fit (two aliased terms can run away together: with a constant current,
     # a torque-constant scale and a constant load are one column, and the pair fits any K)
