@@ -5,8 +5,11 @@ error, decimated, training part only). Its best form (variant) is picked on the 
 the gate only if BOTH
 
 * ``ΔBIC > bic_threshold`` — with the effective sample count of the coloured residual, and
-* the held-out part improves: relative RMS drop > ``min_heldout_gain`` AND the per-chunk change in squared
-  error is significant (t > ``min_heldout_t``).
+* the held-out part improves: relative RMS drop > ``min_heldout_gain`` AND the improvement is significant
+  (:func:`heldout_test`: the held-out squared-error reduction tested in the effect's own direction, with a
+  chunk-robust variance and the t quantile of the chunk count at the one-sided level of ``min_heldout_t`` sigma).
+  A held-out part with too few chunks to reach that level cannot decide: the candidate is reported
+  "not decidable: held-out too short" with the remedy, never silently dropped as not significant.
 
 Among the candidates that pass, the one with the largest held-out improvement is accepted (ranking after
 the gate: a high-ΔBIC but wrong candidate cannot block the right one). Candidates that pass in the same round
@@ -16,20 +19,22 @@ A backward check at the end drops an accepted effect that later ones made redund
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
 import numpy as np
+from scipy import stats
 
 from .candidates import THERMAL, Candidate, Variant, implausible
-from .equation_error import Context, Fit, delta_bic, fit_columns, heldout_comparison, robust_std
+from .equation_error import Context, Fit, delta_bic, fit_columns, heldout_comparison, robust_std, touched
 
 
 @dataclass
 class GateConfig:
     bic_threshold: float = 10.0
     min_heldout_gain: float = 0.02       #: relative RMS improvement on held-out data
-    min_heldout_t: float = 3.0           #: t-statistic of the per-chunk improvement
+    min_heldout_t: float = 3.0           #: one-sided level of the held-out test, in normal sigmas
     alias_corr: float = 0.9
     max_equation_worsening: float = 0.001    #: a multi-equation effect may not worsen any of them (held-out)
     max_rounds: int = 8
@@ -45,11 +50,13 @@ class Evaluation:
     heldout: dict[str, Any]
     passed: bool
     reason: str
+    undecided: bool = False      #: large effect, held-out part too short to decide
 
     def summary(self) -> dict[str, Any]:
         return {"effect": self.effect, "form": self.variant.label, "delta_bic": round(self.dbic, 2),
                 "heldout_gain": round(self.heldout.get("rel", 0.0), 5),
-                "heldout_t": round(self.heldout.get("t", 0.0), 2), "passed": self.passed, "reason": self.reason}
+                "heldout_t": round(self.heldout.get("t", 0.0), 2), "passed": self.passed, "reason": self.reason,
+                **({"verdict": "not_decidable"} if self.undecided else {})}
 
 
 @dataclass
@@ -76,6 +83,77 @@ class SelectionResult:
     rounds: list[list[dict[str, Any]]]
     removed: list[dict[str, Any]]
     iterating: dict = field(default_factory=dict)
+
+
+def heldout_test(ctx: Context, base: Fit, new: Fit, weights: dict[str, float], level_sigma: float = 3.0) -> dict[str, Any]:
+    """Is the held-out improvement of ``new`` over ``base`` significant?
+
+    :func:`heldout_comparison` gives the relative RMS change and a paired t of the per-chunk change in squared
+    error (kept as ``t_paired``). That t divides the mean per-chunk improvement by the spread of the
+    improvements across chunks — and when the effect is excited unevenly (back-EMF or drag only where the speed
+    is high), that spread is the effect itself, not noise: a large clean effect on a short held-out part (few
+    chunks) cannot pass, however good the fit.
+
+    Here the same improvement is tested in the effect's own direction. With ``δ = r0 - r1`` the change the new
+    terms predict (weighted, held-out rows), the held-out squared-error reduction is exactly
+    ``D = Σ r0² - Σ r1² = S (2γ - 1)``, ``S = Σ δ²``, ``γ = Σ δ r0 / S`` (the held-out regression of the base
+    residual on the predicted change: 1 = the training fit carries over, 0 = nothing of it is there). "The
+    held-out error improves" is ``γ > 1/2``. Its standard error comes from the residual left after that
+    regression, summed per chunk of contiguous time (cluster-robust: colour within a chunk is allowed, the
+    variance of an unexcited chunk is ~0 instead of inflating the spread), with the small-sample factor
+    G/(G-1); the critical value is Student's t at the one-sided level of ``level_sigma`` normal sigmas with
+    G_eff - 1 degrees of freedom, G_eff = (Σ_k S_k)² / Σ_k S_k² the number of chunks the effect actually
+    excites (S_k = Σ δ² in chunk k; 3 sigma: t = 3.13 at 60 chunks, 4.53 at 8). Fewer than 4 (effective)
+    chunks make the test not decidable.
+    """
+    ho = heldout_comparison(ctx, base, new, weights)
+    ho["t_paired"] = ho.get("t", 0.0)
+    if not ho.get("available"):
+        return ho
+    hold = ctx.holdout_dec
+    r0s, r1s, ts = [], [], []
+    for eq in (touched(base, new) or list(new.resid)):
+        rows = ctx.blocks[eq].rows(hold, "holdout")
+        if not rows.any():
+            continue
+        w = weights[eq]
+        r0s.append(base.resid[eq][rows] * w)
+        r1s.append(new.resid[eq][rows] * w)
+        ts.append(ctx.t_dec[rows])
+    r0, r1, tt = np.concatenate(r0s), np.concatenate(r1s), np.concatenate(ts)
+    delta = r0 - r1
+    S = float(delta @ delta)
+    dur = float(tt.max() - tt.min()) if len(tt) else 0.0
+    chunk = max(0.25, dur / 60.0)          # the chunks of heldout_comparison
+    cid = np.floor((tt - tt.min()) / chunk).astype(int)
+    _, inv = np.unique(cid, return_inverse=True)
+    G = int(inv.max()) + 1 if len(inv) else 0
+    ho["chunks"] = G
+    ho["chunk_s"] = chunk
+    # chunks the effect does not excite carry no information: the degrees of freedom come from the effective
+    # number of chunks, weighted by the predicted change's energy in each
+    s_k = np.bincount(inv, weights=delta * delta, minlength=G) if G else np.zeros(0)
+    g_eff = float(S * S / float(s_k @ s_k)) if S > 0 else 0.0
+    ho["effective_chunks"] = g_eff
+    ho["t_crit"] = t_critical(g_eff, level_sigma)
+    if S <= 0 or G < 2:
+        ho.update(t=0.0, gamma=0.0)
+        return ho
+    gamma = float(delta @ r0) / S
+    e = r0 - gamma * delta
+    g = np.bincount(inv, weights=delta * e, minlength=G)
+    se = math.sqrt(G / (G - 1) * float(g @ g)) / S
+    ho["gamma"] = gamma
+    ho["t"] = float((gamma - 0.5) / se) if se > 0 else (math.inf if gamma > 0.5 else 0.0)
+    return ho
+
+
+def t_critical(chunks: float, level_sigma: float) -> float:
+    """Student-t quantile with ``chunks - 1`` degrees of freedom (an effective, possibly fractional count) at the
+    one-sided tail of ``level_sigma`` normal sigmas (inf below 4 chunks: not decidable)."""
+    if chunks < 4:
+        return math.inf
+    return float(stats.t.isf(stats.norm.sf(level_sigma), chunks - 1))
 
 
 def fit_model(ctx: Context, cols, keys: list[str], weights, iterating: dict[str, Variant]) -> Fit:
@@ -192,7 +270,7 @@ def _pool(ctx: Context, loc: dict, lib: dict[str, Candidate], names: list[str]):
 def _gate(ctx: Context, cand: Candidate, best: Evaluation, base: Fit, weights, gate: GateConfig) -> Evaluation:
     """The gates a candidate's best form must pass: plausible values, ΔBIC on training data, a significant
     held-out improvement that worsens no equation. Sets ``best.passed`` and ``best.reason``."""
-    best.heldout = heldout_comparison(ctx, base, best.fit, weights)
+    best.heldout = heldout_test(ctx, base, best.fit, weights, gate.min_heldout_t)
     ho = best.heldout
     idx = [best.fit.keys.index(k) for k in best.added]
     why = implausible(cand, best.fit.beta[idx], best.fit.cov[np.ix_(idx, idx)], best.added, best.variant, ctx)
@@ -209,12 +287,22 @@ def _gate(ctx: Context, cand: Candidate, best: Evaluation, base: Fit, weights, g
         worse = [eq for eq, (a0, a1) in ho["per_eq"].items() if a1 > a0 * (1.0 + gate.max_equation_worsening)]
         best.reason = (f"makes the {', '.join(worse)} equation worse on held-out data (one physical "
                        f"parameter must fit every equation it enters)")
-    elif ho["t"] <= gate.min_heldout_t:
+    elif gate.min_heldout_t < ho["t"] <= ho["t_crit"]:
+        # beyond the large-sample level, short of the few-chunk one (infinite below 4): the held-out part
+        # cannot decide
+        best.undecided = True
+        best.reason = (f"not decidable: held-out too short (the effect excites {ho['effective_chunks']:.1f} of "
+                       f"{ho['chunks']} chunks of {ho['chunk_s']:.2g} s; held-out -{100 * ho['rel']:.2f}% RMS, "
+                       f"t = {ho['t']:.1f}, " + (f"<= {ho['t_crit']:.2f} needed there" if math.isfinite(ho['t_crit'])
+                                                else "a test needs >= 4") + f", ΔBIC {best.dbic:.1f}); record a "
+                       f"longer held-out part with more varied motion")
+    elif ho["t"] <= ho["t_crit"]:
         best.reason = (f"held-out improvement {100 * ho['rel']:.2f}% not significant "
-                       f"(t = {ho['t']:.1f} <= {gate.min_heldout_t:g})")
+                       f"(t = {ho['t']:.1f} <= {ho['t_crit']:.2f} at {ho['effective_chunks']:.1f} effective chunks)")
     else:
         best.passed = True
-        best.reason = f"passed: ΔBIC {best.dbic:.1f}, held-out -{100 * ho['rel']:.2f}% RMS (t = {ho['t']:.1f})"
+        best.reason = (f"passed: ΔBIC {best.dbic:.1f}, held-out -{100 * ho['rel']:.2f}% RMS "
+                       f"(t = {ho['t']:.1f} > {ho['t_crit']:.2f} at {ho['effective_chunks']:.1f} effective chunks)")
     return best
 
 
@@ -267,7 +355,8 @@ def _rejected(last_eval: dict[str, Evaluation], accepted, aliases, early_rejecte
             reason = f"explains the same residual as {al[0]['chosen']} (aliased); {reason}"
         out.append({"effect": name, "form": e.variant.label, "reason": reason,
                     "delta_bic": round(e.dbic, 2), "heldout_gain": round(e.heldout.get("rel", 0.0), 5),
-                    "heldout_t": round(e.heldout.get("t", 0.0), 2)})
+                    "heldout_t": round(e.heldout.get("t", 0.0), 2),
+                    **({"verdict": "not_decidable", "heldout_chunks": e.heldout.get("chunks")} if e.undecided else {})})
     return out + early_rejected + [{"effect": r["effect"], "form": r["form"], "reason": r["reason"]} for r in removed]
 
 
@@ -336,6 +425,9 @@ def forward_select(ctx: Context, loc: dict, lib: dict[str, Candidate], names: li
         weights = _weights(ctx, win.fit)
         base = fit_model(ctx, cols, keys, weights, iterating)
         last_eval.pop(win.effect, None)
+    for name, e in last_eval.items():
+        if e.undecided:     # what the user must notice: a large effect this held-out part cannot decide
+            say(f"{name} ({e.variant.label}): {e.reason}")
     # backward check: every accepted effect must still earn its place given the others, and its parameters
     # must stay physical in the joint fit (two aliased terms can run away together: with a constant current,
     # a torque-constant scale and a constant load are one column, and the pair fits any K)
@@ -354,8 +446,8 @@ def forward_select(ctx: Context, loc: dict, lib: dict[str, Candidate], names: li
             others = [k for k in keys if k not in a.added]
             f_without = fit_model(ctx, cols, others, weights, iterating)
             db = delta_bic(f_without, base)
-            ho = heldout_comparison(ctx, f_without, base, weights)
-            if db <= gate.bic_threshold or ho["rel"] <= gate.min_heldout_gain or ho["t"] <= gate.min_heldout_t:
+            ho = heldout_test(ctx, f_without, base, weights, gate.min_heldout_t)
+            if db <= gate.bic_threshold or ho["rel"] <= gate.min_heldout_gain or ho["t"] <= ho["t_crit"]:
                 accepted.remove(a)
                 keys = others
                 base = fit_model(ctx, cols, keys, weights, iterating)
