@@ -107,3 +107,22 @@ def test_fewer_than_four_chunks_cannot_decide():
     assert ho["chunks"] == 3
     assert math.isinf(ho["t_crit"])
     assert ho["rel"] > 0.3 and ho["t"] > 3.0                 # large and beyond 3 sigma: "not decidable"
+
+
+def test_an_undecided_candidate_makes_the_verdict_not_decidable():
+    """A candidate the held-out gate could not decide (large gain, too few chunks) is not 'nothing missing': the
+    verdict is 'not decidable' naming it and the remedy; beside a found effect it is a caveat of 'found'."""
+    from bldc_actuator.diagnosis import decidability
+    from bldc_actuator.diagnosis.results import FOUND, NOT_DECIDABLE, NOTHING_MISSING, decide
+
+    rejected = [{"effect": "viscous_friction", "form": "linear", "reason": "not significant (t = 1.2)"},
+                {"effect": "torque_constant_error", "form": "scale", "verdict": "not_decidable",
+                 "reason": "held-out too short: 3 effective chunks (gain 62 %, t = 40)", "heldout_chunks": 8}]
+    reasons = decidability.undecided_candidates(rejected)
+    assert [u.code for u in reasons] == ["candidate_not_decidable"]
+    assert decide([], []).kind == NOTHING_MISSING
+    v = decide([], reasons)
+    assert v.kind == NOT_DECIDABLE and "torque_constant_error" in v.text() and "viscous" not in v.text()
+    assert any("longer held-out" in r for r in v.remedies())
+    assert decide(["coulomb_friction"], reasons).kind == FOUND
+    assert "caveat" in decide(["coulomb_friction"], reasons).text()

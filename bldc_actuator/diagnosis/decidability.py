@@ -7,7 +7,9 @@
   cannot tell an improvement from noise;
 * the current sits at the drive's limit for most of the run (:data:`CLIPPED_MAX`): current-proportional terms
   (torque constant, its frame factor) are not identifiable;
-* a large structured residual is left that no catalogued effect explains (:mod:`.residual_structure`).
+* a large structured residual is left that no catalogued effect explains (:mod:`.residual_structure`);
+* a candidate effect passed ΔBIC and improves the held-out part beyond 3 sigma, but that part has too few
+  independent chunks for the gate to decide (:func:`undecided_candidates`, from the selection's rejected list).
 """
 
 from __future__ import annotations
@@ -79,3 +81,11 @@ def outside_catalogue(structures) -> list[Undecidable]:
                         "look at the residual plots where it sits; a named effect may need another form, or the "
                         "setup has something the model does not hold (a load, a controller, a sensor artefact)")
             for s in structures if s.large]
+
+
+def undecided_candidates(rejected: list[dict]) -> list[Undecidable]:
+    """One reason per candidate the held-out gate could not decide (``verdict: not_decidable`` in the
+    selection's rejected list): a large effect is neither found nor absent on this held-out part."""
+    return [Undecidable("candidate_not_decidable", f"{r['effect']} ({r.get('form', '')}): {r.get('reason', '')}",
+                        "record a longer held-out part with more varied motion (or give --holdout-file)")
+            for r in rejected if r.get("verdict") == "not_decidable"]

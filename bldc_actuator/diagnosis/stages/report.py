@@ -163,6 +163,7 @@ def run(signals, params, s: Search, j: Judgement, m: Model, options, say: Say, t
                                                                      options.replay)) if u is not None]
     structures = residual_structure.find(ctx, sel.final_fit)
     reasons += decidability.outside_catalogue(structures)
+    reasons += decidability.undecided_candidates(sel.rejected)
     suffix = ""
     if why:
         msg = (f"equation error alone suggests {', '.join(unreproduced)}, but {why}: check the logging rate against "
