@@ -8,7 +8,8 @@ test in the effect's own direction (:func:`selection.heldout_test`) divides by t
 held-out regression on the predicted change, and must
 * pass the clean effect (t above the few-chunk critical value),
 * keep a null (an effect fitted to noise on training data) at the nominal 3-sigma rate,
-* call a held-out part of fewer than 4 chunks not decidable (infinite critical value), not significant.
+* make few chunks pay through the t distribution (df = effective chunks - 1), and call a held-out part
+  with less than 2 effective chunks not decidable (infinite critical value), not significant.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import math
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 from scipy import stats
 
 from bldc_actuator.diagnosis import selection
@@ -97,7 +99,10 @@ def test_a_null_effect_fitted_to_noise_passes_at_the_nominal_rate_only():
     assert above <= 2
 
 
-def test_fewer_than_four_chunks_cannot_decide():
+def test_few_chunks_pay_with_the_t_distribution_and_one_chunk_cannot_decide():
+    """Three chunks: the critical value is Student t with ~2 degrees of freedom (>= 10 at 3 sigma, against 3.13
+    at 60 chunks), so a large effect with a moderate t is 'not decidable', not found; four evenly excited
+    chunks are four (t with 3 dof, finite); a single chunk has no degree of freedom: infinite."""
     rng = np.random.default_rng(3)
     ctx, t = _ctx(0.7)                                       # 3 chunks of 0.25 s
     x = _regressor(t)
@@ -105,8 +110,14 @@ def test_fewer_than_four_chunks_cannot_decide():
     r0 = 0.05 * x + e
     ho = selection.heldout_test(ctx, _fit(r0), _fit(r0 - 0.05 * x), {"mechanical": 1.0})
     assert ho["chunks"] == 3
-    assert math.isinf(ho["t_crit"])
-    assert ho["rel"] > 0.3 and ho["t"] > 3.0                 # large and beyond 3 sigma: "not decidable"
+    assert ho["effective_chunks"] <= 3.0 + 1e-9
+    assert ho["t_crit"] >= float(stats.t.isf(stats.norm.sf(3.0), 2.0)) > 10.0
+    assert ho["rel"] > 0.3 and ho["t"] > 3.0                 # large and beyond 3 sigma
+    s_k = np.full(4, 0.33)
+    four = float(s_k.sum() ** 2 / (s_k @ s_k))
+    assert selection.t_critical(four, 3.0) == pytest.approx(float(stats.t.isf(stats.norm.sf(3.0), 3.0)))
+    assert selection.t_critical(3.9997, 3.0) < 11.0          # four nearly even chunks (the README example)
+    assert math.isinf(selection.t_critical(1.0, 3.0)) and math.isinf(selection.t_critical(1.99, 3.0))
 
 
 def test_an_undecided_candidate_makes_the_verdict_not_decidable():
