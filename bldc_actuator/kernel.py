@@ -47,7 +47,7 @@ _COEF_SCALARS = (
     "tau_c", "tau_asym", "tau_s", "omega_s", "cog_order", "load0", "load_g", "load_phi", "load_k", "load_k0",
     "has_alpha", "has_beta", "has_stribeck", "has_friction", "has_position_load", "k_sat",
     "fe_h", "fe_e", "sens_off_a", "sens_off_b", "sens_gain_a", "sens_gain_b", "has_sensor_error", "v_dt", "dt_delta",
-    "v_lim_mode", "I_fw",
+    "v_lim_mode", "I_fw", "R_ctl", "L_ctl", "K_ctl",
 )
 COEF_DTYPE = np.dtype(
     [(name, np.float64) for name in _COEF_SCALARS]
@@ -242,14 +242,15 @@ def control_tick(c, s):
     err = i_d_ref + 1j * s.i_ref - i                           # i_d_ref = 0 unless field weakening
     v_ff = 0j
     if c.decouple != 0.0:
-        v_ff = 1j * (c.pole_pairs * s.omega * c.L * i + c.K_ref * s.omega)
+        # with the drive's own model of the motor (drive.controller_*), not the true L and K
+        v_ff = 1j * (c.pole_pairs * s.omega * c.L_ctl * i + c.K_ctl * s.omega)
     v_pi = c.Kp * err + s.z + v_ff
     v = limit_voltage(v_pi, c.V_max, c.v_lim_mode)
     if c.v_lim_mode == 3.0 and c.I_fw > 0.0:
         # field-weakening regulator: integrate the voltage demand's excess over the margin into a negative
         # i_d reference (gain: the excess in amperes through the d-axis cross-coupling impedance)
-        z_fw = max(abs(c.pole_pairs * s.omega) * c.L, c.R_ref)
-        w_fw = FW_BANDWIDTH_FRACTION * c.Kp / c.L
+        z_fw = max(abs(c.pole_pairs * s.omega) * c.L_ctl, c.R_ctl)
+        w_fw = FW_BANDWIDTH_FRACTION * c.Kp / c.L_ctl
         s.i_fw = min(max(s.i_fw - w_fw * c.T_c * (abs(v_pi) - FW_VOLTAGE_MARGIN * c.V_max) / z_fw, -c.I_fw), 0.0)
     s.v_next = v                                               # applied after the computation delay
     if c.delay_ns == 0:

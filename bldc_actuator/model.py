@@ -50,7 +50,7 @@ import numpy as np
 
 from . import effects, frames, kernel
 from .kernel import COMPILED, COEF_DTYPE, STATE_DTYPE, warm_up  # noqa: F401  (public)
-from .params import ActuatorParams
+from .params import ActuatorParams, controller_motor
 from .profiles import SimResult  # noqa: F401  (public: Actuator.run returns it)
 
 TWO_PI = 2.0 * math.pi
@@ -142,9 +142,13 @@ class _Coeffs:
             raise ValueError("drive.current_loop_delay must be the same for every actuator of a batch")
         self.delay_ns = min(delays.pop(), self.tick_ns)
         self.T_c = self.tick_ns * 1e-9
+        # the drive's current loop is tuned with, and feeds forward, what IT believes about the motor
+        # (drive.controller_*; 0 = the motor's own value), not the true motor
+        ctl = lambda k: col(lambda p: controller_motor(p)[k])  # noqa: E731
+        self.R_ctl, self.L_ctl, self.K_ctl = ctl(0), ctl(1), ctl(2)
         w_c = TWO_PI * d("current_loop_bandwidth")
-        self.Kp = w_c * self.L
-        self.Ki = w_c * self.R_ref
+        self.Kp = w_c * self.L_ctl
+        self.Ki = w_c * self.R_ctl
         self.decouple = d("decoupling_enabled")
         self.v_lim_mode = col(lambda p: kernel.VOLTAGE_LIMIT_MODES.index(p.drive.voltage_limit_mode))
         self.I_fw = d("field_weakening_current_max")
@@ -413,7 +417,7 @@ class _Base:
 
     def _torque_to_current(self, tau_out):
         c = self._c
-        return tau_out / (c.K_ref * c.N)
+        return tau_out / (c.K_ctl * c.N)        # the drive converts with the K it believes (drive.controller_*)
 
     @property
     def t(self) -> float:

@@ -100,6 +100,13 @@ class DriveParams:
     current_loop_bandwidth: float = _p(1000.0, "Hz", "closed-loop bandwidth the PI gains are tuned for "
                                        "(K_p = 2 pi f L_q, K_i = 2 pi f R_phase)", 1.0, 20000.0)
     decoupling_enabled: bool = _p(True, "", "feed-forward of the omega*L cross-coupling and back-EMF")
+    controller_resistance: float = _p(0.0, "ohm", "R_phase the drive's current loop is tuned with (K_i = 2 pi f R): "
+                                      "what the drive believes, not the motor's; 0 = motor.phase_resistance",
+                                      0.0, 100.0)
+    controller_inductance: float = _p(0.0, "H", "L_q the drive's current loop is tuned with (K_p = 2 pi f L) and "
+                                      "feeds forward (p omega L i); 0 = motor.q_inductance", 0.0, 1.0)
+    controller_torque_constant: float = _p(0.0, "N*m/A", "K_b_q (q-axis, power-invariant) of the drive's back-EMF "
+                                           "feed-forward (K omega); 0 = motor.torque_constant_q", 0.0, 100.0)
     derate_temperature: float = _p(100.0, "degC", "winding temperature where the current limit starts to "
                                    "fall linearly", -40.0, 300.0, runtime=True)
     trip_temperature: float = _p(120.0, "degC", "winding temperature where the drive trips (zero current, "
@@ -362,6 +369,31 @@ def validate(params: ActuatorParams) -> None:
         raise ParameterError("drive.current_loop_bandwidth",
                              f"{d.current_loop_bandwidth:g} Hz is too fast for a {d.current_loop_rate:g} Hz loop "
                              f"(need 2*pi*bandwidth/rate <= 1, i.e. <= {d.current_loop_rate / (2 * math.pi):.0f} Hz)")
+
+
+# -- the drive's model of the motor ----------------------------------------------------------------
+
+#: drive field -> the motor field it stands for when 0 (what the drive's current loop believes about the motor)
+CONTROLLER_FIELDS = {"drive.controller_resistance": "motor.phase_resistance",
+                     "drive.controller_inductance": "motor.q_inductance",
+                     "drive.controller_torque_constant": "motor.torque_constant_q"}
+
+
+def controller_motor(params: ActuatorParams) -> tuple[float, float, float]:
+    """(R_phase [ohm], L_q [H], K_q [V*s/rad]) the drive's current loop is tuned with and feeds forward: the
+    ``drive.controller_*`` fields, each 0 standing for the motor's own value."""
+    d, m = params.drive, params.motor
+    return (d.controller_resistance or m.phase_resistance, d.controller_inductance or m.q_inductance,
+            d.controller_torque_constant or m.torque_constant_q)
+
+
+def keep_controller_of(params: ActuatorParams, nominal: ActuatorParams) -> ActuatorParams:
+    """``params`` with the drive's model of the motor pinned to ``nominal``'s: a finding that changes the motor
+    (R, L, K) does not retune the recorded drive, which was tuned on the nominal values. Each controller field
+    whose effective value differs from ``nominal``'s is set explicitly to it; ``params`` itself when none does."""
+    new, old = controller_motor(params), controller_motor(nominal)
+    changes = {f: o for f, n, o in zip(CONTROLLER_FIELDS, new, old) if n != o}
+    return params.replace(**changes) if changes else params
 
 
 # -- datasheet block ------------------------------------------------------------------------------

@@ -27,7 +27,7 @@ import numpy as np
 
 from .. import effects, frames
 from ..model import BatchActuator
-from ..params import SPECS, ActuatorParams, from_flat, outside_usual_range
+from ..params import SPECS, ActuatorParams, controller_motor, from_flat, keep_controller_of, outside_usual_range
 from .candidates import Candidate
 from .equation_error import Context, Fit, thermal_response
 from .selection import SelectionResult, fit_model
@@ -312,7 +312,11 @@ def updated_params(ctx: Context, sel: SelectionResult, pars: dict[str, dict], li
     except Exception as exc:  # noqa: BLE001 - a fitted value the schema refuses: keep the nominal, say why
         notes.append(f"updated parameters rejected by the schema ({exc}); nominal kept")
         newp = ctx.params
-    return newp, notes, not_sim
+    pinned = keep_controller_of(newp, ctx.params)
+    if pinned is not newp:
+        notes.append("drive.controller_* kept at the nominal motor values: the recorded drive's current loop was "
+                     "tuned on them, a finding changes the motor, not the drive")
+    return pinned, notes, not_sim
 
 
 # -- replay (multiple shooting) ----------------------------------------------------------------------
@@ -322,8 +326,8 @@ def _commands(ctx: Context) -> tuple[np.ndarray, str]:
     if "current_command" in ctx.have:
         return ctx.raw["current_command"], "current_command"
     if "torque_command" in ctx.have:
-        return ctx.raw["torque_command"] / (p.motor.torque_constant_q * p.gear.gear_ratio), \
-            "torque_command / (nominal K_t_q x gear ratio)"
+        return ctx.raw["torque_command"] / (controller_motor(p)[2] * p.gear.gear_ratio), \
+            "torque_command / (the drive's nominal K_t_q x gear ratio)"
     return ctx.dec.lowpass(ctx.sig["i_q"]), "measured current (no command recorded)"
 
 
@@ -405,6 +409,10 @@ def simulate_windows(ctx: Context, param_sets: list[ActuatorParams], starts: lis
     plist = []
     use_sensor = "torque" in ctx.have
     for p in param_sets:
+        # the recorded drive was tuned on the nominal motor: a set that changes R, L or K changes the plant, not
+        # the drive's gains and feed-forward (issue #14: a true K_t x1.15 was refused when the replayed drive's
+        # feed-forward followed it)
+        p = keep_controller_of(p, ctx.params)
         if use_sensor:   # the sensor measures the load: the modelled load must not count twice
             p = p.replace(**{"load.load_torque": 0.0, "load.gravity_torque": 0.0, "load.spring_stiffness": 0.0})
         plist += [p] * nW
@@ -614,9 +622,11 @@ def window_start(plist: list[ActuatorParams], i_d_meas, i_q_meas, omega, theta, 
             e = kernel.dead_time_error_dq(i, h_over_L * (v_try - v_pred), th_e, v_dt, delta, h_over_L)
             v_plant = v_plant - e
         v_app = kernel.limit_voltage(v_plant, v_max, mode)
-        # the feed-forward acts on the MEASURED current with the nominal-temperature K of the drive's parameters
+        # the feed-forward acts on the MEASURED current with the drive's own model of the motor (its L and
+        # nominal-temperature K, drive.controller_*: 0 = the motor's), as the kernel's current loop does
         i_m = complex(float(np.asarray(i_d_meas)[c]), float(np.asarray(i_q_meas)[c]))
-        v_ff = 1j * (m.pole_pairs * w * m.q_inductance * i_m + m.torque_constant_q * w) if d.decoupling_enabled else 0j
+        _, L_ctl, K_ctl = controller_motor(p)
+        v_ff = 1j * (m.pole_pairs * w * L_ctl * i_m + K_ctl * w) if d.decoupling_enabled else 0j
         K[c], v[c], z[c] = Kc, v_app, v_app - v_ff
     return WindowStart(i_d, i_q, v, z, K)
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import time
 
+from ...params import keep_controller_of
 from .. import base_model, output_error, refit
 from .data import Judgement, Model, Say, Search
 
@@ -51,6 +52,8 @@ def run(s: Search, j: Judgement, options, say: Say) -> Model:
         params, tnotes, tns = refit.apply_thermal(params, special)
         notes += tnotes
         not_sim += tns
+    # the written file re-simulates like the recorded drive: its current loop keeps the nominal motor values
+    params = keep_controller_of(params, ctx.params)
     base = base_model.check(ctx)   # several core values far off: say so before any effect
     dt = time.perf_counter() - t0
     say(f"5/6 refit: {len(j.final.keys)} fitted coefficient(s); not yet simulated: {not_sim or 'none'} "
