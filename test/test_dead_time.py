@@ -21,6 +21,8 @@ from bldc_actuator.diagnosis.signals import Signals
 from bldc_actuator.model import Actuator, ActuatorState
 from bldc_actuator.params import ActuatorParams
 
+from test_issue14_judge_helpers import closed_loop_recording
+
 V_DT = 0.4      # [V] per leg
 
 
@@ -114,39 +116,16 @@ TRUTH = NOMINAL.replace(**{"drive.dead_time": 0.4 / (20000.0 * NOMINAL.drive.bus
 
 
 def _recording(truth: ActuatorParams, seed: int, duration: float = 12.0, rate: float = 1000.0) -> Signals:
-    """Closed-loop recording from the project's simulator: a PD position loop (15 Hz) on a 14-bit encoder around
-    the current-controlled actuator, sines of several speeds (current of both signs), q/d current and voltage with
-    noise, like a drive logs them."""
-    rng = np.random.default_rng(seed)
-    act = Actuator(truth)
-    n, dt = int(duration * rate), 1.0 / rate
-    J, K = NOMINAL.motor.rotor_inertia, NOMINAL.motor.torque_constant_q
-    wn = 2 * np.pi * 15
-    kp, kd = J * wn ** 2 / K, 2 * 0.7 * J * wn / K
-    q = 2 * np.pi / 2 ** 14
-    t = np.arange(n) * dt
+    """Closed-loop recording from the project's simulator (:func:`closed_loop_recording`: a PD position loop at
+    15 Hz on a 14-bit encoder, gains from the nominal parameters, q/d current and voltage with noise, like a drive
+    logs them) following sines of several speeds (current of both signs)."""
     ph = 0.7 * seed
-    ref = (4 * np.sin(2 * np.pi * 0.3 * t + ph) + 1.5 * np.sin(2 * np.pi * 1.3 * t) + 1.2 * np.sin(2 * np.pi * 4.7 * t)
-           + 0.4 * np.sin(2 * np.pi * 9.1 * t + ph))
-    dref = np.gradient(ref, dt)
-    names = ("current_command", "current", "current_d", "position", "velocity", "voltage_q", "voltage_d")
-    out = {k: np.zeros(n) for k in names}
-    prev = 0.0
-    for k in range(n):
-        s = act.state
-        pos = round(s.theta / q) * q
-        vel = (pos - prev) / dt if k else 0.0
-        prev = pos
-        cmd = min(15.0, max(-15.0, kp * (ref[k] - pos) + kd * (dref[k] - vel)))
-        out["current_command"][k] = cmd
-        out["current"][k] = s.i_q + 0.03 * rng.standard_normal()
-        out["current_d"][k] = s.i_d + 0.03 * rng.standard_normal()
-        out["position"][k], out["velocity"][k] = pos, vel
-        out["voltage_q"][k] = s.v_q + 0.02 * rng.standard_normal()
-        out["voltage_d"][k] = s.v_d + 0.02 * rng.standard_normal()
-        act.set_current_command(cmd)
-        act.step(dt)
-    return Signals(t, out, source="synthetic delta dead time")
+
+    def reference(t):
+        return (4 * np.sin(2 * np.pi * 0.3 * t + ph) + 1.5 * np.sin(2 * np.pi * 1.3 * t)
+                + 1.2 * np.sin(2 * np.pi * 4.7 * t) + 0.4 * np.sin(2 * np.pi * 9.1 * t + ph))
+
+    return closed_loop_recording(truth, NOMINAL, reference, duration=duration, rate=rate, seed=seed)
 
 
 def test_dead_time_on_a_delta_motor_is_found_written_and_simulated():
