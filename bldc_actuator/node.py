@@ -35,7 +35,6 @@ Parameters: see :mod:`bldc_actuator.node_params`. ``actuator_node --help`` lists
 from __future__ import annotations
 
 import gc
-import math
 import operator
 import sys
 import threading
