@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from bldc_actuator.diagnosis.cleaning import clean
-from bldc_actuator.diagnosis.loaders import LoadError, Mapping, load, load_csv, load_mcap, parse_expression
+from bldc_actuator.diagnosis.io.cleaning import clean
+from bldc_actuator.diagnosis.io.loaders import LoadError, Mapping, load, load_csv, load_mcap, parse_expression
 from bldc_actuator.diagnosis.signals import CANONICAL, DataIssue, Signals
 from bldc_actuator.params import ActuatorParams
 
