@@ -797,6 +797,9 @@ def clean(raw: Signals, limits: dict | None = None, params=None) -> Signals:
                 if name == "position" or abs(val) < 0.05 * big or len(uniq) < 20:
                     continue                        # a rest value (0 A, 0 rad/s, a parked angle) or a coarse
                 at = fin == val                     # sensor with few levels is no clipping
+                # a limit is reached: the run the recording starts in is its initial state (a temperature at
+                # ambient until the heating shows), not a limiter, and is not counted; coming back to it later is
+                at[: int(np.argmin(at)) if at[0] else 0] = False
                 cnt = int(at.sum())
                 if cnt >= max(10, int(0.01 * len(fin)), 10 * typical):
                     ctx.issue("clipped", name, cnt, float(t[fin_idx[np.flatnonzero(at)[0]]]),
