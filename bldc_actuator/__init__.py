@@ -50,8 +50,8 @@ _EXPORTS: dict[str, tuple[str, str | None]] = {
     "parameters_from_recording": ("bldc_actuator.recording", "parameters_from_recording"),
     "resimulate": ("bldc_actuator.replay", "resimulate"),
     # diagnosis
-    "load_signals": ("bldc_actuator.diagnosis.loaders", "load"),
-    "clean_signals": ("bldc_actuator.diagnosis.cleaning", "clean"),
+    "load_signals": ("bldc_actuator.diagnosis.io.loaders", "load"),
+    "clean_signals": ("bldc_actuator.diagnosis.io.cleaning", "clean"),
     "diagnose": ("bldc_actuator.diagnosis.pipeline", "diagnose"),
     "DiagnoseOptions": ("bldc_actuator.diagnosis.pipeline", "DiagnoseOptions"),
 }

@@ -17,7 +17,7 @@ from benchmarks.concealed import cases as C  # noqa: E402
 def case_recordings(case, tmp_path: Path):
     """(training, held-out, nominal parameters) of ``case``: generated under ``tmp_path`` unless already there,
     loaded and cleaned."""
-    from bldc_actuator.diagnosis import cleaning, loaders
+    from bldc_actuator.diagnosis.io import cleaning, loaders
 
     d = tmp_path / case.name
     if not (d / "train.csv").exists():

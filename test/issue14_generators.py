@@ -10,56 +10,21 @@ import numpy as np
 from bldc_actuator.diagnosis.signals import Signals
 from bldc_actuator.model import Actuator
 from bldc_actuator.params import ActuatorParams
+from test_issue14_judge_helpers import closed_loop_recording, triangle_then_sines
 
 NOMINAL = ActuatorParams().replace(**{"gear.gear_ratio": 9.0})
 
 
 def pd_run(truth: ActuatorParams, *, duration=16.0, rate=1000.0, seed=0, disturbance=None, limit=15.0,
            report_limit=False, ref=None, noise_i=0.03, noise_v=0.02):
-    """Closed-loop PD (15 Hz) position run of ``truth`` at ``rate``: current command clamped at ``limit``;
+    """Closed-loop PD (15 Hz) position run of ``truth`` at ``rate`` (gains from NOMINAL; the tests' one recorder,
+    :func:`test_issue14_judge_helpers.closed_loop_recording`): current command clamped at ``limit``;
     ``disturbance(t)`` an unlogged external torque at the output; ``report_limit``: the drive reports the
-    current as exactly its limit while the command is clamped (as real drives log a limited current)."""
-    rng = np.random.default_rng(seed)
-    act = Actuator(truth)
-    n = int(duration * rate)
-    dt = 1.0 / rate
-    J, K = NOMINAL.motor.rotor_inertia, NOMINAL.motor.torque_constant_q
-    wn = 2 * np.pi * 15
-    kp, kd = J * wn ** 2 / K, 2 * 0.7 * J * wn / K
-    q = 2 * np.pi / 2 ** 14
-    t = np.arange(n) * dt
-    if ref is None:
-        T = t % 16.0
-        slow = np.where(T < 3, 0.8 * T, 0.8 * (6 - T))
-        s = T - 6
-        fast = 6 * np.sin(2 * np.pi * 0.35 * s) + 2.0 * np.sin(2 * np.pi * 1.7 * s) + 0.4 * np.sin(2 * np.pi * 5.3 * s)
-        r = np.where(T < 6, slow, fast)
-    else:
-        r = ref(t)
-    dr = np.gradient(r, dt)
-    out = {k: np.zeros(n) for k in ("current_command", "current", "current_d", "position", "velocity", "voltage_q",
-                                    "voltage_d")}
-    prev = 0.0
-    for k in range(n):
-        st = act.state
-        pos = round(st.theta / q) * q
-        vel = (pos - prev) / dt if k else 0.0
-        prev = pos
-        cmd = kp * (r[k] - pos) + kd * (dr[k] - vel)
-        clamped = abs(cmd) >= limit
-        cmd = min(limit, max(-limit, cmd))
-        out["current_command"][k] = cmd
-        out["current"][k] = cmd if (report_limit and clamped) else st.i_q + noise_i * rng.standard_normal()
-        out["current_d"][k] = st.i_d + noise_i * rng.standard_normal()
-        out["position"][k] = pos
-        out["velocity"][k] = vel
-        out["voltage_q"][k] = st.v_q + noise_v * rng.standard_normal()
-        out["voltage_d"][k] = st.v_d + noise_v * rng.standard_normal()
-        if disturbance is not None:
-            act.set_load_torque(float(disturbance(t[k])))
-        act.set_current_command(cmd)
-        act.step(dt)
-    return Signals(t, out, source="synthetic")
+    current as exactly its limit while the command is clamped (as real drives log a limited current); ``ref(t)``
+    the rotor angle [rad], by default the slow triangle then sines."""
+    return closed_loop_recording(truth, NOMINAL, ref if ref is not None else triangle_then_sines, duration=duration,
+                                 rate=rate, seed=seed, noise_i=noise_i, noise_v=noise_v, cmd_limit=limit,
+                                 disturbance=disturbance, report_limit=report_limit)
 
 
 def dyno_run(p: ActuatorParams, *, duration=20.0, rate=1000.0, noise=0.002, seed=1, w_ref=None, kp=0.02, ki=0.4):

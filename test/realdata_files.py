@@ -2,8 +2,8 @@
 dataset knowledge: every file is read by the input profile its header matches).
 
 ``list_datasets(shared)`` -> [DatasetInfo]; ``load_dataset(name, shared, clean=True)`` reads the file (or,
-for a folder name, all its files as segments) with :func:`bldc_actuator.diagnosis.loaders.load` /
-:func:`~bldc_actuator.diagnosis.loaders.load_many` and auto-detected profiles, then cleans it.
+for a folder name, all its files as segments) with :func:`bldc_actuator.diagnosis.io.loaders.load` /
+:func:`~bldc_actuator.diagnosis.io.loaders.load_many` and auto-detected profiles, then cleans it.
 """
 
 from __future__ import annotations
@@ -83,8 +83,8 @@ def list_datasets(shared_dir: str | Path | None = None) -> list[DatasetInfo]:
 
 
 def load_dataset(name: str, shared_dir: str | Path | None = None, *, clean: bool = True, params=None):
-    from bldc_actuator.diagnosis import loaders
-    from bldc_actuator.diagnosis.cleaning import clean as _clean
+    from bldc_actuator.diagnosis.io import loaders
+    from bldc_actuator.diagnosis.io.cleaning import clean as _clean
 
     entries = _entries(data_dir(shared_dir))
     for info, files in entries:

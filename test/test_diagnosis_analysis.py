@@ -20,62 +20,27 @@ from bldc_actuator.diagnosis.pipeline import DiagnoseOptions, diagnose
 from bldc_actuator.diagnosis.signals import Signals
 from bldc_actuator.model import Actuator, ActuatorState
 from bldc_actuator.params import ActuatorParams, dump_yaml, load_yaml
+from test_issue14_judge_helpers import closed_loop_recording, triangle_then_sines
 
 NOMINAL = ActuatorParams().replace(**{"gear.gear_ratio": 9.0})
 DURATION = 16.0
 RATE = 1000.0
 
 
-def reference(t: np.ndarray) -> np.ndarray:
-    """Rotor-side position reference [rad]: a slow triangle (±0.8 rad/s, both directions: friction and
-    angle effects), then sines of several speeds (inertia, viscous, current)."""
-    T = t % 16.0
-    slow = np.where(T < 3, 0.8 * T, 0.8 * (6 - T))
-    s = T - 6
-    fast = 6 * np.sin(2 * np.pi * 0.35 * s) + 2.0 * np.sin(2 * np.pi * 1.7 * s) + 0.4 * np.sin(2 * np.pi * 5.3 * s)
-    return np.where(T < 6, slow, fast)
+reference = triangle_then_sines     # rotor-side angle [rad]: a slow triangle both ways, then sines of several speeds
 
 
 def make_recording(truth: ActuatorParams, duration: float = DURATION, rate: float = RATE, seed: int = 0,
                    noise_i: float = 0.03, noise_v: float = 0.02, enc_bits: int = 14, temps: bool = False,
                    drop: tuple = ()) -> Signals:
-    """Closed-loop recording of ``truth``: PD (15 Hz) on the quantised angle, commands = current [A]; recorded
-    like a drive: q/d current with noise, encoder angle, backward-difference velocity, v_q/v_d with noise."""
-    rng = np.random.default_rng(seed)
-    act = Actuator(truth)
-    n = int(duration * rate)
-    dt = 1.0 / rate
-    J, K = NOMINAL.motor.rotor_inertia, NOMINAL.motor.torque_constant_q
-    wn = 2 * np.pi * 15
-    kp, kd = J * wn ** 2 / K, 2 * 0.7 * J * wn / K
-    q = 2 * np.pi / 2 ** enc_bits
-    t = np.arange(n) * dt
-    ref = reference(t)
-    dref = np.gradient(ref, dt)
-    names = ("current_command", "current", "current_d", "position", "velocity", "voltage_q", "voltage_d",
-             "winding_temperature", "housing_temperature")
-    out = {k: np.zeros(n) for k in names}
-    prev = 0.0
-    for k in range(n):
-        s = act.state
-        pos = round(s.theta / q) * q
-        vel = (pos - prev) / dt if k else 0.0
-        prev = pos
-        cmd = min(15.0, max(-15.0, kp * (ref[k] - pos) + kd * (dref[k] - vel)))
-        out["current_command"][k] = cmd
-        out["current"][k] = s.i_q + noise_i * rng.standard_normal()
-        out["current_d"][k] = s.i_d + noise_i * rng.standard_normal()
-        out["position"][k] = pos
-        out["velocity"][k] = vel
-        out["voltage_q"][k] = s.v_q + noise_v * rng.standard_normal()
-        out["voltage_d"][k] = s.v_d + noise_v * rng.standard_normal()
-        out["winding_temperature"][k] = s.T_winding + 0.05 * rng.standard_normal()
-        out["housing_temperature"][k] = s.T_housing + 0.05 * rng.standard_normal()
-        act.set_current_command(cmd)
-        act.step(dt)
-    if not temps:
-        drop = tuple(drop) + ("winding_temperature", "housing_temperature")
-    return Signals(t, {k: v for k, v in out.items() if k not in drop}, source="synthetic")
+    """Closed-loop recording of ``truth`` (:func:`test_issue14_judge_helpers.closed_loop_recording`): PD (15 Hz)
+    on the quantised angle, commands = current [A]; recorded like a drive: q/d current with noise, encoder angle,
+    backward-difference velocity, v_q/v_d with noise; winding/housing temperature (0.05 K noise) with ``temps``."""
+    keep = [c for c in ("current_command", "current", "current_d", "position", "velocity", "voltage_q", "voltage_d",
+                        "winding_temperature", "housing_temperature")
+            if c not in drop and (temps or not c.endswith("_temperature"))]
+    return closed_loop_recording(truth, NOMINAL, reference, duration=duration, rate=rate, seed=seed, noise_i=noise_i,
+                                 noise_v=noise_v, enc_bits=enc_bits, noise_T=0.05, channels=keep)
 
 
 def without(sig: Signals, *names: str) -> Signals:

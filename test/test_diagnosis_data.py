@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from bldc_actuator.diagnosis.cleaning import clean
-from bldc_actuator.diagnosis.loaders import LoadError, Mapping, load, load_csv, load_mcap, parse_expression
+from bldc_actuator.diagnosis.io.cleaning import clean
+from bldc_actuator.diagnosis.io.loaders import LoadError, Mapping, load, load_csv, load_mcap, parse_expression
 from bldc_actuator.diagnosis.signals import CANONICAL, DataIssue, Signals
 from bldc_actuator.params import ActuatorParams
 
@@ -109,6 +109,49 @@ def test_spike_found_by_robust_statistics_without_parameters(tmp_path):
     assert spike[0].first_time == pytest.approx(T_SPIKE)
     # a step edge of the command (5 -> -5 A every 0.2 s) is not a spike
     assert s.meta["accounting"]["masked"] == {"current": 1}
+
+
+AMBIENT_C, T_ON = 25.0, 0.05
+
+
+def _heating_run(winding=None, housing=None, n=4000, rate=1000.0) -> Signals:
+    """Motion both ways, a current switched on at T_ON and the first-order heating it causes (analytic step
+    response, time constant 0.8 s / 2 s): both temperatures sit exactly at ambient until T_ON (50 samples, 1.25 %
+    of the record), as the demo's recording does. ``winding``/``housing`` replace a temperature channel."""
+    t = np.arange(n) / rate
+    w = 5 * np.sin(2 * np.pi * 0.7 * t) + 2 * np.sin(2 * np.pi * 2.1 * t)
+    th = np.concatenate([[0.0], np.cumsum(0.5 * (w[1:] + w[:-1]) / rate)])
+    on = t >= T_ON
+    rise = lambda tau: np.where(on, -np.expm1(-(t - T_ON) / tau), 0.0)  # noqa: E731
+    ch = {"position": th, "velocity": w, "current": np.where(on, 0.5 * w + 1.0, 0.0),
+          "winding_temperature": AMBIENT_C + 3.0 * rise(0.8) if winding is None else winding,
+          "housing_temperature": AMBIENT_C + 0.5 * rise(2.0) if housing is None else housing}
+    return Signals(t, ch, "heating")
+
+
+def test_temperature_at_ambient_before_the_heating_is_not_clipped():
+    """The run a channel starts in is its initial state, not a limit: nothing is flagged "clipped" (it was, with
+    the demo's 51 samples at 25 degC), yet a sensor ceiling or a floor the signal comes back to still is, with
+    exactly the clipped samples counted."""
+    s = clean(_heating_run(), params=ActuatorParams())
+    assert _issues(s, "clipped") == [] and s.meta["clipped"] == {}
+    # a winding sensor that tops out at ambient + 2.9 K: the samples above are counted, from the first one
+    t = np.arange(4000) / 1000.0
+    true_w = AMBIENT_C + 3.0 * np.where(t >= T_ON, -np.expm1(-(t - T_ON) / 0.8), 0.0)
+    ceiling = AMBIENT_C + 2.9
+    s = clean(_heating_run(winding=np.minimum(true_w, ceiling)), params=ActuatorParams())
+    (hit,) = _issues(s, "clipped", "winding_temperature")
+    assert hit.count == int((true_w >= ceiling).sum()) > 1000 and "max" in hit.detail
+    assert hit.first_time == pytest.approx(t[np.argmax(true_w >= ceiling)])
+    assert s.meta["clipped"]["winding_temperature"]["levels"] == [ceiling]
+    # a housing sensor whose floor is the start value, the signal swinging 3 K about ambient + 1 K after T_ON:
+    # only the samples that come back to the floor count, not the 50 it starts with
+    swing = AMBIENT_C + np.where(t >= T_ON, 1.0 + 3.0 * np.sin(2 * np.pi * 0.5 * (t - T_ON)), 0.0)
+    s = clean(_heating_run(housing=np.maximum(swing, AMBIENT_C)), params=ActuatorParams())
+    (hit,) = _issues(s, "clipped", "housing_temperature")
+    assert hit.count == int(((swing <= AMBIENT_C) & (t >= T_ON)).sum()) > 1000 and "min" in hit.detail
+    first = t[np.argmax((swing <= AMBIENT_C) & (t >= T_ON))]
+    assert first > 1.0 and hit.first_time == pytest.approx(first)
 
 
 def test_clock_jump_back_is_dropped_reported_and_split(tmp_path):

@@ -56,8 +56,8 @@ def rclpy_ok():
 
 
 def _track_file(path, params):
-    from bldc_actuator.diagnosis.cleaning import clean
-    from bldc_actuator.diagnosis.loaders import load
+    from bldc_actuator.diagnosis.io.cleaning import clean
+    from bldc_actuator.diagnosis.io.loaders import load
     from bldc_actuator.fleet.health import track
 
     return {t.parameter: t for t in track(clean(load(path, params=params), params=params), params)}
@@ -243,7 +243,7 @@ def test_multi_joint_node_recording_gives_one_row_set_per_joint(rclpy_ok, tmp_pa
     names): each joint is diagnosed on its own, the planted friction shows on the right joint only."""
     import inspect
 
-    from bldc_actuator.diagnosis import loaders
+    from bldc_actuator.diagnosis.io import loaders
     from bldc_actuator.fleet import run as R
     from bldc_actuator.fleet import source
     from bldc_actuator.node import Q_AXIS_FIELDS

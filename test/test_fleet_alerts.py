@@ -153,7 +153,7 @@ def coverage():
     """|value - truth| / sd of every tracked parameter on 8 short noise-free closed-loop logs (10 s) and 8
     noisy ones (30 s), generated with known truth (1 % unit-to-unit spread, warm start)."""
     from benchmarks import fleet_gen as G
-    from bldc_actuator.diagnosis.cleaning import clean
+    from bldc_actuator.diagnosis.io.cleaning import clean
     from bldc_actuator.fleet.health import track
 
     nominal = G.nominal_params()

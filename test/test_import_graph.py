@@ -79,7 +79,20 @@ def test_the_graph_sees_a_cycle():
     assert _cycles({"a": {"b"}, "b": {"a"}, "c": set()}) == [["a", "b"]]
 
 
+def test_diagnosis_io_is_the_bottom_layer():
+    """diagnosis/io (loaders, formats, profiles, quirks, cleaning) reads recordings into Signals: within the
+    diagnosis it may use only ``signals`` and itself, never the method (search, judge, fit, report) above it."""
+    g = _graph()
+    io_mods = [m for m in g if m.startswith("bldc_actuator.diagnosis.io")]
+    assert "bldc_actuator.diagnosis.io.cleaning" in io_mods and "bldc_actuator.diagnosis.io.loaders" in io_mods
+    allowed = ("bldc_actuator.diagnosis.io", "bldc_actuator.diagnosis.signals")
+    above = {m: sorted(t for t in g[m] if t.startswith("bldc_actuator.diagnosis")
+                       and not any(t == a or t.startswith(a + ".") for a in allowed))
+             for m in io_mods}
+    assert {m: t for m, t in above.items() if t} == {}
+
+
 def test_no_import_cycles_in_the_package():
     g = _graph()
-    assert "bldc_actuator.diagnosis.input_profiles" in g["bldc_actuator.diagnosis.loaders"]
+    assert "bldc_actuator.diagnosis.io.input_profiles" in g["bldc_actuator.diagnosis.io.loaders"]
     assert _cycles(g) == []

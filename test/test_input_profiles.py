@@ -9,9 +9,9 @@ import textwrap
 import numpy as np
 import pytest
 
-from bldc_actuator.diagnosis import input_profiles as ip
-from bldc_actuator.diagnosis import loaders, quirks
-from bldc_actuator.diagnosis.cleaning import clean
+from bldc_actuator.diagnosis.io import input_profiles as ip
+from bldc_actuator.diagnosis.io import loaders, quirks
+from bldc_actuator.diagnosis.io.cleaning import clean
 from bldc_actuator.params import ActuatorParams
 
 GEAR = 9.0

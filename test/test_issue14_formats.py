@@ -10,9 +10,9 @@ import math
 import numpy as np
 import pytest
 
-from bldc_actuator.diagnosis import cleaning, loaders
+from bldc_actuator.diagnosis.io import cleaning, loaders
 from bldc_actuator.diagnosis import torque_balance as tb
-from bldc_actuator.diagnosis.mapping import Mapping
+from bldc_actuator.diagnosis.io.mapping import Mapping
 from bldc_actuator.diagnosis.signals import Signals
 from bldc_actuator.params import ActuatorParams
 from issue14_generators import NOMINAL, dyno_run, limited_run, short_span_w, write_csv

@@ -20,7 +20,7 @@ import math
 import pytest
 
 from bldc_actuator import cli
-from bldc_actuator.diagnosis import cleaning
+from bldc_actuator.diagnosis.io import cleaning
 from bldc_actuator.diagnosis import cli as dcli
 from bldc_actuator.diagnosis.pipeline import TORQUE_BALANCE, DiagnoseOptions, diagnose, route
 from bldc_actuator.diagnosis.report import DiagnosisReport

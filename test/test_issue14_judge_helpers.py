@@ -12,16 +12,34 @@ from bldc_actuator.model import Actuator
 from bldc_actuator.params import ActuatorParams
 
 
+def triangle_then_sines(t: np.ndarray) -> np.ndarray:
+    """Rotor-side position reference [rad], period 16 s: a slow triangle (±0.8 rad/s, both directions: friction
+    and angle effects), then sines of several speeds (inertia, viscous, current)."""
+    T = t % 16.0
+    slow = np.where(T < 3, 0.8 * T, 0.8 * (6 - T))
+    s = T - 6
+    fast = 6 * np.sin(2 * np.pi * 0.35 * s) + 2.0 * np.sin(2 * np.pi * 1.7 * s) + 0.4 * np.sin(2 * np.pi * 5.3 * s)
+    return np.where(T < 6, slow, fast)
+
+
 def closed_loop_recording(truth: ActuatorParams, nominal: ActuatorParams, reference, *, duration: float,
                           rate: float = 1000.0, seed: int = 0, bandwidth_hz: float = 15.0,
                           noise_i: float = 0.03, noise_v: float = 0.02, enc_bits: int = 14, cmd_limit: float = 15.0,
                           channels=("current_command", "current", "current_d", "position", "velocity", "voltage_q",
                                     "voltage_d"),
-                          enc_step: float | None = None) -> Signals:
+                          enc_step: float | None = None, disturbance=None, report_limit: bool = False,
+                          noise_T: float | None = None) -> Signals:
     """PD position loop (``bandwidth_hz``, damping 0.7, gains from the NOMINAL J and K) around the current-
     controlled ``truth`` actuator; ``reference(t)`` the motor-side angle [rad]. Logged: the q/d current with
     noise, the encoder angle (``enc_bits`` per turn, or a step of ``enc_step`` [rad]), backward-difference
-    velocity, v_q/v_d with noise (the currents as the drive's sensors report them), the current command and the output torque command (``torque_command``)."""
+    velocity, v_q/v_d with noise (the currents as the drive's sensors report them), the current command and the
+    output torque command (``torque_command``); with ``noise_T`` [K] also the winding and housing temperatures.
+    ``disturbance(t)``: an unlogged external torque at the output [N*m]. ``report_limit``: while the command is
+    clamped at ``cmd_limit`` the drive logs the current as exactly that limit (as real drives log a limited
+    current). Noise is drawn per sample in the order current, current_d, voltage_q, voltage_d (, winding, housing
+    when ``noise_T`` is given, whether or not those are in ``channels``): one ``seed`` gives one noise sequence
+    whichever channels are kept. The one closed-loop recorder of the tests (the diagnosis analysis, significance,
+    issue-14 format/verdict and judge tests all record through it)."""
     rng = np.random.default_rng(seed)
     act = Actuator(truth)
     n = int(round(duration * rate))
@@ -34,7 +52,7 @@ def closed_loop_recording(truth: ActuatorParams, nominal: ActuatorParams, refere
     ref = reference(t)
     dref = np.gradient(ref, dt)
     names = ("current_command", "torque_command", "current", "current_d", "position", "velocity", "voltage_q",
-             "voltage_d")
+             "voltage_d", "winding_temperature", "housing_temperature")
     out = {k: np.zeros(n) for k in names}
     prev = 0.0
     d = truth.drive
@@ -49,15 +67,22 @@ def closed_loop_recording(truth: ActuatorParams, nominal: ActuatorParams, refere
         pos = round(s.theta / q) * q
         vel = (pos - prev) / dt if k else 0.0
         prev = pos
-        cmd = min(cmd_limit, max(-cmd_limit, kp * (ref[k] - pos) + kd * (dref[k] - vel)))
+        cmd = kp * (ref[k] - pos) + kd * (dref[k] - vel)
+        clamped = abs(cmd) >= cmd_limit
+        cmd = min(cmd_limit, max(-cmd_limit, cmd))
         out["current_command"][k] = cmd
         out["torque_command"][k] = cmd * K * N
-        out["current"][k] = i_q + noise_i * rng.standard_normal()
+        out["current"][k] = cmd if (report_limit and clamped) else i_q + noise_i * rng.standard_normal()
         out["current_d"][k] = i_d + noise_i * rng.standard_normal()
         out["position"][k] = pos
         out["velocity"][k] = vel
         out["voltage_q"][k] = s.v_q + noise_v * rng.standard_normal()
         out["voltage_d"][k] = s.v_d + noise_v * rng.standard_normal()
+        if noise_T is not None:
+            out["winding_temperature"][k] = s.T_winding + noise_T * rng.standard_normal()
+            out["housing_temperature"][k] = s.T_housing + noise_T * rng.standard_normal()
+        if disturbance is not None:
+            act.set_load_torque(float(disturbance(t[k])))
         act.set_current_command(cmd)
         act.step(dt)
     return Signals(t, {k: v for k, v in out.items() if k in channels}, source="synthetic")

@@ -62,8 +62,8 @@ def test_demo_is_registered_as_a_subcommand():
 def test_node_recording_diagnosed_closes_the_loop(tmp_path):
     """A node run whose motor has twice the preset's Coulomb friction, diagnosed against the preset: the
     recording alone names coulomb_friction, fits it near the truth, and the updated parameter file loads."""
-    from bldc_actuator.diagnosis.cleaning import clean
-    from bldc_actuator.diagnosis.loaders import load
+    from bldc_actuator.diagnosis.io.cleaning import clean
+    from bldc_actuator.diagnosis.io.loaders import load
     from bldc_actuator.diagnosis.pipeline import DiagnoseOptions, diagnose
     from bldc_actuator.params import dump_yaml, load_yaml
 

@@ -150,7 +150,7 @@ def test_an_unknown_joint_name_is_rejected_for_that_name_only(ros_context, ros_e
 def test_one_recording_diagnoses_per_joint(ros_context, ros_executor, tmp_path):
     from std_msgs.msg import Float64MultiArray
 
-    from bldc_actuator.diagnosis import loaders
+    from bldc_actuator.diagnosis.io import loaders
     from bldc_actuator.diagnosis.cli import register  # noqa: F401 - the CLI that takes --joint
     from bldc_actuator.recording import read_recording
 

@@ -163,6 +163,15 @@ def test_colcon_installed_cli_runs_from_install(colcon_install_prefix: Path):
     )  # fmt: skip
     assert result.returncode == 0, result.stdout + result.stderr
     assert "bldc-actuator" in result.stdout
+    # the installed diagnosis/io finds every input profile in the install's share/, not in the checkout
+    found = subprocess.run(
+        [sys.executable, "-c", "from bldc_actuator.diagnosis.io import input_profiles as ip\n"
+         "for p in ip.available(): print(p.name, p.path)"],
+        env=env, cwd=prefix, capture_output=True, text=True, timeout=60, check=True,
+    ).stdout.split("\n")  # fmt: skip
+    found = dict(line.split(" ", 1) for line in found if line)
+    assert set(found) == {p.stem for p in (REPO_ROOT / "config" / "input_profiles").glob("*.yaml")} != set()
+    assert all(Path(path).resolve().is_relative_to(prefix.resolve()) for path in found.values()), found
 
 
 # ------------------------------------------------------------------------------- the ROS test harness

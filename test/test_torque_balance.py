@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from bldc_actuator.diagnosis import torque_balance as tb
-from bldc_actuator.diagnosis.cleaning import clean
+from bldc_actuator.diagnosis.io.cleaning import clean
 from bldc_actuator.diagnosis.signals import Signals
 from bldc_actuator.model import Actuator
 from bldc_actuator.params import ActuatorParams

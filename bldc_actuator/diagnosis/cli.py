@@ -71,7 +71,7 @@ def _fail(msg: str) -> int:
 
 
 def _load(path: str, mapping, params, joint=None, profile=None, progress=False):
-    from . import cleaning, loaders
+    from .io import cleaning, loaders
 
     raw = loaders.load(path, mapping=mapping, params=params, joint=joint, profile=profile)
     if progress and raw.meta.get("profile"):
@@ -97,7 +97,7 @@ def run(args) -> int:
     except (ParameterError, FileNotFoundError) as exc:
         return _fail(f"--params {args.params}: {exc}")
     try:
-        from .loaders import Mapping
+        from .io.loaders import Mapping
 
         mapping = Mapping.from_yaml(args.map_file) if args.map_file else Mapping()
         extra = Mapping.parse(args.map)

@@ -2,7 +2,7 @@
 and show the fit improve on data it did not fit.
 
 The method in stages, each a module with one entry point and plain data between them
-(:mod:`.stages.data`); the caller has loaded (:func:`.loaders.load`) and cleaned (:func:`.cleaning.clean`) the
+(:mod:`.stages.data`); the caller has loaded (:func:`.io.loaders.load`) and cleaned (:func:`.io.cleaning.clean`) the
 recording:
 
 * :mod:`.stages.search` — equation error: the recording in the model's frame, the nominal residuals and replay,

@@ -3,7 +3,7 @@
 
 Canonical channels (:data:`CANONICAL`) are SI and on the MOTOR side unless the name says otherwise
 (``torque``, ``torque_command`` and ``load_torque`` are at the OUTPUT, after the gear). Loaders
-(:mod:`.loaders`, through :mod:`.input_profiles` for foreign formats) translate recordings into these names; :func:`.cleaning.clean` finds
+(:mod:`.io.loaders`, through :mod:`.io.input_profiles` for foreign formats) translate recordings into these names; :func:`.io.cleaning.clean` finds
 and reports problems. A masked sample is ``NaN``: it stays in the arrays (so indices and time line up)
 and is excluded from fits.
 
@@ -84,7 +84,7 @@ class DataIssue:
 class Signals:
     """Canonical time series of one recording.
 
-    time      [s], strictly increasing after :func:`.cleaning.clean` (raw loader output may not be)
+    time      [s], strictly increasing after :func:`.io.cleaning.clean` (raw loader output may not be)
     channels  canonical name -> float array, same length as ``time``; ``NaN`` = masked / not sampled
     source    file path or description
     issues    what was found (loaders add parse-level issues, cleaning adds the rest)

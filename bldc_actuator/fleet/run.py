@@ -92,7 +92,7 @@ def process_file(job: Job) -> dict[str, Any]:
     rows: list[dict] = []
     failures: list[dict] = []
     try:
-        from ..diagnosis.loaders import Mapping
+        from ..diagnosis.io.loaders import Mapping
         from . import source
 
         mapping = Mapping.from_yaml(job.mapping_file) if job.mapping_file else None
@@ -134,7 +134,7 @@ def _params_for(job: Job, path_id: str):
 
 def _process_joint(job: Job, joint, mapping) -> tuple[list[dict], list[dict]]:
     """Rows of one joint and the failures of its stages (a failing stage keeps the other's rows)."""
-    from ..diagnosis.cleaning import clean
+    from ..diagnosis.io.cleaning import clean
     from . import source
     from .health import track
 

@@ -1,7 +1,7 @@
 """Where a fleet recording comes from: which joints a file holds, and each joint's Signals, actuator id and
 start time.
 
-A thin adapter over :mod:`bldc_actuator.diagnosis.loaders` (``load(path, *, mapping, params, profile,
+A thin adapter over :mod:`bldc_actuator.diagnosis.io.loaders` (``load(path, *, mapping, params, profile,
 joint)`` and ``joints(path, profile)`` read every format through input profiles). The adapter only adds
 what a fleet needs on top, in this order of preference:
 
@@ -21,7 +21,7 @@ import os
 import re
 from pathlib import Path
 
-from ..diagnosis import loaders
+from ..diagnosis.io import loaders
 
 _DATE = re.compile(r"(?<!\d)(20\d\d)[-_]?(0[1-9]|1[0-2])[-_]?([0-2]\d|3[01])"
                    r"(?:[T_ -]?([01]\d|2[0-3])[-:_]?([0-5]\d)(?:[-:_]?([0-5]\d))?)?(?!\d)")

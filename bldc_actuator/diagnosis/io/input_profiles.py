@@ -46,10 +46,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ..signals import DataIssue, Signals
 from . import quirks as _quirks
 from .csvio import load_csv
 from .mapping import TARGETS, LoadError, Mapping
-from .signals import DataIssue, Signals
 
 #: unit -> (scale, offset) to SI (value_SI = scale * value + offset); ``erpm`` needs the pole pairs
 UNITS: dict[str, tuple[float, float]] = {
@@ -194,7 +194,7 @@ class InputProfile:
 # ------------------------------------------------------------------------------------------- registry
 
 def profile_dir() -> Path:
-    from ..params import config_dir
+    from ...params import config_dir
 
     return config_dir() / "input_profiles"
 
@@ -239,9 +239,9 @@ class FileHead:
     @classmethod
     def read(cls, path: Path, n: int = 8) -> "FileHead":
         if path.suffix.lower() == ".mcap":
-            from .mcapio import _mcap_topics
+            from .mcapio import mcap_topics
 
-            return cls([], topics=list(_mcap_topics(path)))
+            return cls([], topics=list(mcap_topics(path)))
         lines: list[str] = []
         try:
             with open(path, newline="", encoding="utf-8-sig", errors="replace") as f:

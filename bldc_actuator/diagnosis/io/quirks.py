@@ -1,6 +1,6 @@
 """Known quirks of a log format, as generic operations an input profile names (``quirks:`` in its YAML).
 
-Every operation reports what it did as a :class:`~.signals.DataIssue` (or a note): nothing is changed
+Every operation reports what it did as a :class:`~..signals.DataIssue` (or a note): nothing is changed
 silently. The product holds no knowledge of a particular dataset; a profile says which operation applies
 with which arguments (see ``config/input_profiles/*.yaml`` and docs/realdata.md).
 
@@ -32,7 +32,7 @@ import operator
 
 import numpy as np
 
-from .signals import DataIssue, Signals
+from ..signals import DataIssue, Signals
 
 # ---------------------------------------------------------------------------------------- expressions
 

@@ -1,4 +1,4 @@
-"""CSV recordings -> raw :class:`~.signals.Signals` (a header row, or header-less with ``#k`` columns).
+"""CSV recordings -> raw :class:`~..signals.Signals` (a header row, or header-less with ``#k`` columns).
 
 Loaders only translate; they never mask or drop samples (except rows with nothing parseable, which are
 reported). Problems are found and reported by :func:`.cleaning.clean`.
@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..signals import CANONICAL, DataIssue, Signals
 from .mapping import TARGETS, LoadError, Mapping, parse_expression
-from .signals import CANONICAL, DataIssue, Signals
 
 def _delimiter(line: str) -> str:
     counts = {d: line.count(d) for d in (",", ";", "\t")}
@@ -50,7 +50,7 @@ def load_csv(path: str | Path, mapping: Mapping | None = None, params=None, *,
              aux: dict[str, str] | None = None, only_mapped: bool = False, skip_lines: int = 0,
              units_row: bool = False, time_rate: float | None = None) -> Signals:
     """CSV with a header row. Default columns: ``time`` plus any canonical names (SI units, see
-    :data:`~.signals.CANONICAL`); ``mapping`` renames/scales other columns (``#k`` for header-less files).
+    :data:`~..signals.CANONICAL`); ``mapping`` renames/scales other columns (``#k`` for header-less files).
     Empty cells are NaN; a row with fewer fields than the header gets NaN for the missing ones (reported);
     a non-numeric cell in a used column is an error naming the line and column.
     ``aux`` (name -> expression, same syntax as a mapping) reads extra non-canonical columns into

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .signals import CANONICAL
+from ..signals import CANONICAL
 
 #: mapping targets: the canonical channels plus the time axis
 TARGETS = ("time",) + tuple(CANONICAL)

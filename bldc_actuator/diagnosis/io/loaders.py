@@ -1,4 +1,4 @@
-"""Read recordings into raw :class:`~.signals.Signals` (canonical names, SI, motor side).
+"""Read recordings into raw :class:`~..signals.Signals` (canonical names, SI, motor side).
 
 :func:`load` decides how a file is read, in this order:
 
@@ -21,11 +21,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ..signals import CANONICAL, DataIssue, Signals
 from . import input_profiles
 from .csvio import load_csv
 from .mapping import TARGETS, LoadError, Mapping, parse_expression
-from .mcapio import _mcap_topics, load_mcap
-from .signals import CANONICAL, DataIssue, Signals
+from .mcapio import load_mcap, mcap_topics
 
 __all__ = ["load", "load_many", "joints", "load_csv", "load_mcap", "Mapping", "LoadError", "parse_expression",
            "TARGETS"]
@@ -44,7 +44,7 @@ def _has_canonical_header(path: Path) -> bool:
 
 
 def _own_mcap_joints(path: Path) -> list[str]:
-    topics = _mcap_topics(path)
+    topics = mcap_topics(path)
     q = [t for t in topics if t.endswith("/q_axis_state")]
     if len(q) > 1 and any(t.endswith("joint_states") for t in topics):
         return sorted(t.rsplit("/", 2)[-2] for t in q)
@@ -59,7 +59,7 @@ def resolve_profile(path: str | Path, profile=None) -> "input_profiles.InputProf
         return input_profiles.get(profile)
     suffix = path.suffix.lower()
     if suffix == ".mcap":
-        if _own_mcap_joints(path) or any(t.endswith("/q_axis_state") for t in _mcap_topics(path)):
+        if _own_mcap_joints(path) or any(t.endswith("/q_axis_state") for t in mcap_topics(path)):
             return None
         return input_profiles.detect(path)
     if _has_canonical_header(path):

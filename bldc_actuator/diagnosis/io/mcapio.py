@@ -1,4 +1,4 @@
-"""ROS 2 MCAP recordings -> raw :class:`~.signals.Signals`: this project's own recordings by their topics,
+"""ROS 2 MCAP recordings -> raw :class:`~..signals.Signals`: this project's own recordings by their topics,
 foreign ones through a :class:`~.mapping.Mapping` (``topic.field[index]``). Fields are read straight from the
 CDR bytes with the file's own message schemas."""
 
@@ -10,8 +10,8 @@ from typing import Any
 
 import numpy as np
 
+from ..signals import COMMAND_CHANNELS, DataIssue, Signals
 from .mapping import LoadError, Mapping
-from .signals import COMMAND_CHANNELS, DataIssue, Signals
 
 #: default mapping for this project's own recordings (topics of ``actuator_node``; ``~`` = node namespace)
 OWN_TOPICS = {
@@ -321,7 +321,7 @@ def _mcap_raw(path: Path, topics: set[str] | None):
     (``read_raw``: fast, and it recovers unfinalized files); falls back to the mcap library."""
     notes: list[str] = []
     try:
-        from ..recording import read_raw
+        from ...recording import read_raw
 
         raw = read_raw(path, topics=topics)
         notes += [f"recording: {i}" for i in raw.issues]
@@ -351,7 +351,7 @@ def _mcap_raw(path: Path, topics: set[str] | None):
     return summary.channels, summary.schemas, msgs, meta, notes
 
 
-def _mcap_topics(path: Path) -> dict[str, str]:
+def mcap_topics(path: Path) -> dict[str, str]:
     """topic -> type, from the summary (fast) or a message-free scan (unfinalized files)."""
     from mcap.reader import make_reader
 
@@ -436,7 +436,7 @@ def _recorded_parameters(metadata: list[tuple[str, dict]]) -> dict | None:
     if text is None:
         return None
     try:
-        from ..recording import parameters_from_yaml
+        from ...recording import parameters_from_yaml
 
         return parameters_from_yaml(text)
     except Exception:  # noqa: BLE001 - unreadable parameters: loaded without them (noted by the caller)
@@ -446,7 +446,7 @@ def _recorded_parameters(metadata: list[tuple[str, dict]]) -> dict | None:
 def _params_from_flat(flat: dict | None):
     if not flat:
         return None
-    from ..params import SPECS, from_flat
+    from ...params import SPECS, from_flat
 
     try:
         return from_flat({k: (tuple(v) if isinstance(v, list) else v) for k, v in flat.items() if k in SPECS})
@@ -488,7 +488,7 @@ def load_mcap(path: str | Path, mapping: Mapping | None = None, params=None, joi
     if not path.exists():
         raise LoadError(f"{path}: no such file")
     mapping = mapping or Mapping()
-    topic_types = _mcap_topics(path)
+    topic_types = mcap_topics(path)
     topic_names = list(topic_types)
     own = _own_recording(topic_types)
 

@@ -1,5 +1,5 @@
 """Find, report and (only where it is safe) repair dirty recordings. Nothing is dropped silently: every
-change is a :class:`~.signals.DataIssue` with numbers, and ``meta["accounting"]`` balances the rows
+change is a :class:`~..signals.DataIssue` with numbers, and ``meta["accounting"]`` balances the rows
 (``rows_in == rows_out + sum(dropped)``); masked values are kept in ``meta["masked"]``.
 
 What :func:`clean` does, in order
@@ -45,7 +45,7 @@ from typing import Any
 
 import numpy as np
 
-from .signals import CANONICAL, COMMAND_CHANNELS, DataIssue, Signals
+from ..signals import CANONICAL, COMMAND_CHANNELS, DataIssue, Signals
 
 DEFAULTS: dict[str, Any] = {
     "gap_factor": 5.0,            # gap = interval > gap_factor x median period
@@ -271,7 +271,7 @@ def _diff_sigma(x: np.ndarray, segments) -> float:
 
 def _no_load_speed(params, bus: float) -> float | None:
     try:
-        from .. import frames
+        from ... import frames
 
         return float(frames.no_load_speed_max(bus, params.motor.torque_constant_q, params.motor.winding))
     except Exception:  # noqa: BLE001
@@ -677,7 +677,7 @@ def _current_vs_command(ctx: _Ctx, t, ch) -> None:
     r = _ratio(i, c)
     if r is None or r[1] < 0.9 or abs(r[0] - 1) < 0.03:
         return
-    from .. import frames
+    from ... import frames
 
     best = None
     for name, (f, _) in frames.torque_constant_frame_factors().items():
@@ -797,6 +797,9 @@ def clean(raw: Signals, limits: dict | None = None, params=None) -> Signals:
                 if name == "position" or abs(val) < 0.05 * big or len(uniq) < 20:
                     continue                        # a rest value (0 A, 0 rad/s, a parked angle) or a coarse
                 at = fin == val                     # sensor with few levels is no clipping
+                # a limit is reached: the run the recording starts in is its initial state (a temperature at
+                # ambient until the heating shows), not a limiter, and is not counted; coming back to it later is
+                at[: int(np.argmin(at)) if at[0] else 0] = False
                 cnt = int(at.sum())
                 if cnt >= max(10, int(0.01 * len(fin)), 10 * typical):
                     ctx.issue("clipped", name, cnt, float(t[fin_idx[np.flatnonzero(at)[0]]]),
