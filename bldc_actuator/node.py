@@ -80,6 +80,7 @@ COMMAND_QUEUE_DEPTH = 100
 DETAIL_REFRESH_NS = 100_000_000
 
 OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
+_LEVEL_BYTES = tuple(bytes([level]) for level in range(3))
 
 
 def labelled_layout(msg: Float64MultiArray, labels: tuple[str, ...]) -> Float64MultiArray:
@@ -254,6 +255,9 @@ class ActuatorNode(Node):
         m.position, m.velocity, m.effort = self.scheduler.position, self.scheduler.velocity, self.scheduler.effort
         self.scheduler.share_joint_state(m.position, m.velocity, m.effort)   # (the setters copied them)
         self._m_clock = ClockMsg(clock=self._stamp_now)
+        self._m_diag: DiagnosticArray | None = None   # built at the first diagnostics, then updated in place
+        # the full outputs on detail periods only once a detail topic has a subscriber (see _refresh_detail)
+        self.scheduler.detail_wanted = False
         # a robot model: the whole multibody's state (free base included) at the detail cadence, recorded
         self.pub_body = None
         if self.mujoco_model:
@@ -428,8 +432,11 @@ class ActuatorNode(Node):
         publish = self._publish
         if self.pub_clock is not None:
             publish(self.pub_clock, self._m_clock, t_ns)
-        publish(self.pub_joint, self._m_joint, t_ns)
-        if detail:
+        if self.recorder is None:
+            self.pub_joint.publish(self._m_joint)
+        else:
+            publish(self.pub_joint, self._m_joint, t_ns)
+        if detail and (self._detail_all or self.pub_body is not None):   # (any detail topic created)
             now = time.monotonic_ns()
             if now >= self._next_detail_refresh:
                 self._refresh_detail(now)
@@ -470,22 +477,43 @@ class ActuatorNode(Node):
 
     def _status(self, h: Health) -> DiagnosticStatus:
         name = f"{self.get_fully_qualified_name()}: " + (h.joint if self.multi else "actuator")
-        return DiagnosticStatus(level=bytes([h.level]), name=name, message=h.message, hardware_id=h.joint,
+        return DiagnosticStatus(level=_LEVEL_BYTES[h.level], name=name, message=h.message, hardware_id=h.joint,
                                 values=[KeyValue(key=k, value=v) for k, v in h.values.items()])
 
     def diagnostic_statuses(self, outs: list[dict] | None = None) -> list[DiagnosticStatus]:
-        """One diagnostics status per joint (over the window since the last one, which this resets)."""
-        rec = self.recording_error or (str(self.node_values["node.record"]) if self.recorder else "off")
-        health = self.scheduler.health(outs, error=self.recording_error, values={"recording": rec})
-        return [self._status(h) for h in health]
+        """One diagnostics status per joint (over the window since the last one, which this resets); new
+        messages (the published ones are reused)."""
+        return [self._status(h) for h in self._health(outs)]
 
     def diagnostic_status(self, joint: int = 0) -> DiagnosticStatus:
         """The current diagnostics entry of one joint (level, message, key values); also resets the window."""
         return self.diagnostic_statuses()[joint]
 
+    def _health(self, outs: list[dict] | None):
+        rec = self.recording_error or (str(self.node_values["node.record"]) if self.recorder else "off")
+        return self.scheduler.health(outs, error=self.recording_error, values={"recording": rec})
+
     def _publish_diagnostics(self, outs: list[dict], t_ns: int) -> None:
-        msg = DiagnosticArray(status=self.diagnostic_statuses(outs))
-        msg.header.stamp = _stamp(t_ns)
+        """Publish /diagnostics: one reusable DiagnosticArray whose statuses and key values are updated in place
+        (building 12 statuses of ~20 KeyValue messages anew cost more than serialising them)."""
+        health = self._health(outs)
+        msg = self._m_diag
+        if msg is None:
+            msg = self._m_diag = DiagnosticArray(status=[self._status(h) for h in health])
+            self._diag_keys = [tuple(h.values) for h in health]
+        else:
+            keys = self._diag_keys
+            for k, (st, h) in enumerate(zip(msg.status, health)):
+                st.level = _LEVEL_BYTES[h.level]
+                st.message = h.message
+                if keys[k] == tuple(h.values):
+                    for kv, value in zip(st.values, h.values.values()):
+                        kv.value = value
+                else:   # (the set of keys changed: rebuild this status)
+                    msg.status[k] = self._status(h)
+                    keys[k] = tuple(h.values)
+        stamp = msg.header.stamp
+        stamp.sec, stamp.nanosec = divmod(t_ns, 1_000_000_000)
         self._publish(self.pub_diag, msg, t_ns)
 
     # ------------------------------------------------------------------------------------ commands
@@ -503,7 +531,8 @@ class ActuatorNode(Node):
 
     def _on_commands(self, msg: Float64MultiArray) -> None:
         """ros2_control ForwardCommandController convention: one value per joint, ``joints`` order."""
-        self._record_in(self.sub_commands, msg)
+        if self.recorder is not None:
+            self._write(self._commands_topic, msg, self.t_ns)
         with self._lock:
             self.scheduler.commands(msg.data, self._commands_topic)
             self.scheduler.lock_step_period()
