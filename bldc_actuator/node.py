@@ -4,7 +4,8 @@ This module is the ROS wiring (parameters, topics, messages, timer, recording) a
 :class:`bldc_actuator.scheduler.Scheduler`, which steps the plant, keeps lock-step, the watchdog, the command
 checks and the diagnostics levels.
 
-Inputs (commands hold until replaced; with ``joints`` given the per-joint topics are ``~/<joint>/...``)
+Inputs (commands hold until replaced; with ``joints`` given the per-joint topics are ``~/<joint>/...`` and,
+by default, exist only once the graph shows a peer for them: see ``node.joint_topics``)
     ``~/current_command``  std_msgs/Float64            q-axis current [A]
     ``~/torque_command``   std_msgs/Float64            output torque [N*m]
     ``~/commands``         std_msgs/Float64MultiArray  ros2_control ForwardCommandController: one element per
@@ -685,6 +686,8 @@ are ~/<joint>/...):
        /clock (node.publish_clock), ~/mujoco/body_state (with mujoco.model: the whole multibody's qpos and
        qvel, labelled, at node.detail_rate, on demand)
 
+With joints given, each per-joint topic is created once a publisher (commands) or subscriber (detail topics)
+appears on it, checked every second (node.joint_topics:=always creates them all at start).
 Per-joint parameters: joint.<name>.preset, joint.<name>.params_file, joint.<name>.<model parameter>.
 A robot: -p mujoco.model:=robot.xml -p joint.knee.preset:=ak80_9 ... drives the MJCF model's joints (MuJoCo
 integrates the bodies; the joints are those named in joint.<name>.*, or joints:=[...]).
