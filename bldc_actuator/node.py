@@ -4,7 +4,8 @@ This module is the ROS wiring (parameters, topics, messages, timer, recording) a
 :class:`bldc_actuator.scheduler.Scheduler`, which steps the plant, keeps lock-step, the watchdog, the command
 checks and the diagnostics levels.
 
-Inputs (commands hold until replaced; with ``joints`` given the per-joint topics are ``~/<joint>/...``)
+Inputs (commands hold until replaced; with ``joints`` given the per-joint topics are ``~/<joint>/...`` and,
+by default, exist only once the graph shows a peer for them: see ``node.joint_topics``)
     ``~/current_command``  std_msgs/Float64            q-axis current [A]
     ``~/torque_command``   std_msgs/Float64            output torque [N*m]
     ``~/commands``         std_msgs/Float64MultiArray  ros2_control ForwardCommandController: one element per
@@ -35,6 +36,7 @@ Parameters: see :mod:`bldc_actuator.node_params`. ``actuator_node --help`` lists
 from __future__ import annotations
 
 import gc
+import inspect
 import operator
 import sys
 import threading
@@ -79,6 +81,7 @@ COMMAND_QUEUE_DEPTH = 100
 DETAIL_REFRESH_NS = 100_000_000
 
 OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
+_LEVEL_BYTES = tuple(bytes([level]) for level in range(3))
 
 
 def labelled_layout(msg: Float64MultiArray, labels: tuple[str, ...]) -> Float64MultiArray:
@@ -95,12 +98,34 @@ def _stamp(t_ns: int) -> TimeMsg:
     return TimeMsg(sec=t_ns // 1_000_000_000, nanosec=t_ns % 1_000_000_000)
 
 
-class JointTopics:
-    """One joint's ROS entities: publishers, subscriptions and the reusable detail messages (their header
-    stamp is the node's one stamp, updated in place every period)."""
+#: per-joint command topics (subscriptions) and detail topics (publishers), with the JointTopics attribute
+#: that holds each entity (None until created: see ``node.joint_topics``)
+COMMAND_TOPICS = {"current_command": "sub_current", "torque_command": "sub_torque", "load_torque": "sub_load",
+                  "reset_fault": "sub_reset"}
+DETAIL_TOPICS = {"phase_currents": "pub_phase", "q_axis_state": "pub_q", "winding_temperature": "pub_tw",
+                 "housing_temperature": "pub_th"}
+#: wall time between looks at the ROS graph for per-joint topics created on demand [s]
+GRAPH_POLL_S = 1.0
 
-    def __init__(self, name: str, stamp: TimeMsg):
+
+def _timer_callback(method):
+    """``method`` as a plain function that carries its (empty) signature: rclpy's EventsExecutor inspects a timer
+    callback's signature at EVERY call (looking for a TimerInfo parameter), ~13 us for a bound method, ~2 us for
+    this (1 kHz: a point of a core)."""
+    def callback():
+        method()
+    callback.__signature__ = inspect.Signature()
+    return callback
+
+
+class JointTopics:
+    """One joint's ROS entities: publishers, subscriptions (attributes None while not created, see
+    ``node.joint_topics``) and the reusable detail messages (their header stamp is the node's one stamp,
+    updated in place every period)."""
+
+    def __init__(self, name: str, stamp: TimeMsg, prefix: str):
         self.name = name
+        self.prefix = prefix    # relative topic prefix: "~/" or "~/<joint>/"
         self.pub_phase = self.pub_q = self.pub_tw = self.pub_th = None
         self.sub_current = self.sub_torque = self.sub_load = self.sub_reset = None
         self.m_phase = labelled_layout(Float64MultiArray(), PHASE_FIELDS)
@@ -110,8 +135,8 @@ class JointTopics:
             m.header.frame_id = name
             m.header.stamp = stamp
 
-    def detail(self):
-        """``(publisher, fill(outputs) -> message)`` of each detail topic."""
+    def detail(self) -> dict:
+        """``{detail topic: fill(outputs) -> message}``."""
         m_phase, m_q, m_tw, m_th = self.m_phase, self.m_q, self.m_tw, self.m_th
 
         def phase(o):
@@ -130,7 +155,7 @@ class JointTopics:
             m_th.temperature = float(o["T_housing"])
             return m_th
 
-        return [(self.pub_phase, phase), (self.pub_q, q), (self.pub_tw, tw), (self.pub_th, th)]
+        return {"phase_currents": phase, "q_axis_state": q, "winding_temperature": tw, "housing_temperature": th}
 
 
 class ActuatorNode(Node):
@@ -153,7 +178,7 @@ class ActuatorNode(Node):
         self._lock = threading.RLock()
         self.recorder = None
         self.recording_error = ""   # set once a write to the recording failed
-        self._timer = None
+        self._timer = self._graph_timer = None
         self.done = Future()
         try:
             base, nv, self.preset = NP.declare_all(self)
@@ -190,7 +215,8 @@ class ActuatorNode(Node):
                                    on_finished=self._on_finished)
         self.joints: list[JointCommand] = self.scheduler.joints
         self._stamp_now = TimeMsg()   # one Time message, updated in place: every header of a period shares it
-        self.topics = [JointTopics(j.name, self._stamp_now) for j in self.joints]
+        self.topics = [JointTopics(j.name, self._stamp_now, f"~/{j.name}/" if self.multi else "~/")
+                       for j in self.joints]
 
         qos = QoSProfile(depth=10)
         self._qos = qos
@@ -198,23 +224,22 @@ class ActuatorNode(Node):
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", qos)
         self.pub_clock = self.create_publisher(ClockMsg, "/clock", qos) if nv["node.publish_clock"] else None
         # deep command queues: in lock-step mode every command counts (one period each), even in bursts
-        cq = QoSProfile(depth=COMMAND_QUEUE_DEPTH)
-        for j, jt in zip(self.joints, self.topics):
-            pre = f"~/{j.name}/" if self.multi else "~/"
-            jt.pub_phase = self.create_publisher(Float64MultiArray, pre + "phase_currents", qos)
-            jt.pub_q = self.create_publisher(Float64MultiArray, pre + "q_axis_state", qos)
-            jt.pub_tw = self.create_publisher(Temperature, pre + "winding_temperature", qos)
-            jt.pub_th = self.create_publisher(Temperature, pre + "housing_temperature", qos)
-            jt.sub_current = self.create_subscription(
-                Float64, pre + "current_command", lambda m, j=j, jt=jt: self._on_scalar(j, jt.sub_current,
-                                                                                        "current", m), cq)
-            jt.sub_torque = self.create_subscription(
-                Float64, pre + "torque_command", lambda m, j=j, jt=jt: self._on_scalar(j, jt.sub_torque,
-                                                                                       "torque", m), cq)
-            jt.sub_load = self.create_subscription(Float64, pre + "load_torque",
-                                                   lambda m, j=j, jt=jt: self._on_load(j, jt, m), cq)
-            jt.sub_reset = self.create_subscription(Empty, pre + "reset_fault",
-                                                    lambda m, j=j, jt=jt: self._on_reset(j, jt, m), qos)
+        cq = self._cq = QoSProfile(depth=COMMAND_QUEUE_DEPTH)
+        self._detail_all: list = []   # (joint index, publisher, fill) of every detail publisher created
+        self._detail_live: list = []
+        self._next_detail_refresh = 0
+        # the per-joint topics: all now, or each once the graph shows a peer for it (node.joint_topics)
+        mode = nv["node.joint_topics"]
+        self.joint_topics_on_demand = (mode == "on_demand" or (mode == "auto" and self.multi)) \
+            and not nv["node.record"]   # (a recording registers every topic up front)
+        self._pending: list[tuple[str, bool, int, str]] = []   # (resolved name, is command, joint, topic)
+        for k, jt in enumerate(self.topics):
+            for topic in (*COMMAND_TOPICS, *DETAIL_TOPICS):
+                if self.joint_topics_on_demand:
+                    self._pending.append((self.resolve_topic_name(jt.prefix + topic), topic in COMMAND_TOPICS,
+                                          k, topic))
+                else:
+                    self._create_joint_entity(k, topic)
         self.sub_commands = self.create_subscription(Float64MultiArray, "~/commands", self._on_commands, cq)
         topic = nv["node.joint_commands_topic"]
         self.sub_joint_commands = self.create_subscription(JointState, topic, self._on_joint_commands, cq) \
@@ -231,22 +256,71 @@ class ActuatorNode(Node):
         m.position, m.velocity, m.effort = self.scheduler.position, self.scheduler.velocity, self.scheduler.effort
         self.scheduler.share_joint_state(m.position, m.velocity, m.effort)   # (the setters copied them)
         self._m_clock = ClockMsg(clock=self._stamp_now)
+        self._m_diag: DiagnosticArray | None = None   # built at the first diagnostics, then updated in place
+        # the full outputs on detail periods only once a detail topic has a subscriber (see _refresh_detail)
+        self.scheduler.detail_wanted = False
         # a robot model: the whole multibody's state (free base included) at the detail cadence, recorded
         self.pub_body = None
         if self.mujoco_model:
             self.pub_body = self.create_publisher(Float64MultiArray, "~/mujoco/body_state", qos)
             self._m_body = labelled_layout(Float64MultiArray(), self.plant.body_state_labels())
-        self._detail_all = [(k, pub, fill) for k, jt in enumerate(self.topics) for pub, fill in jt.detail()]
-        self._detail_live: list = []
-        self._next_detail_refresh = 0
 
         record = nv["node.record"]
         if record:
             self._open_recorder(record)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+        if self._pending:
+            self._graph_timer = self.create_timer(GRAPH_POLL_S, _timer_callback(self._discover), clock=self._steady)
         if start:
             self.start()
+
+    def _create_joint_entity(self, k: int, topic: str) -> None:
+        """Create joint ``k``'s subscription (a :data:`COMMAND_TOPICS` topic) or publisher (a
+        :data:`DETAIL_TOPICS` topic)."""
+        j, jt = self.joints[k], self.topics[k]
+        name = jt.prefix + topic
+        if topic in DETAIL_TOPICS:
+            mtype = Temperature if topic.endswith("temperature") else Float64MultiArray
+            pub = self.create_publisher(mtype, name, self._qos)
+            setattr(jt, DETAIL_TOPICS[topic], pub)
+            self._detail_all.append((k, pub, jt.detail()[topic]))
+            self._next_detail_refresh = 0   # look at its subscribers at the next detail period
+            return
+        if topic == "reset_fault":
+            sub = self.create_subscription(Empty, name, lambda m: self._on_reset(j, jt, m), self._qos)
+        elif topic == "load_torque":
+            sub = self.create_subscription(Float64, name, lambda m: self._on_load(j, jt, m), self._cq)
+        else:
+            kind = topic.split("_")[0]   # current | torque
+            attr = COMMAND_TOPICS[topic]
+            sub = self.create_subscription(Float64, name,
+                                           lambda m: self._on_scalar(j, getattr(jt, attr), kind, m), self._cq)
+        setattr(jt, COMMAND_TOPICS[topic], sub)
+
+    def _discover(self) -> None:
+        """``node.joint_topics`` on demand (every :data:`GRAPH_POLL_S` s of wall time): create the per-joint
+        subscriptions whose topic has a publisher and the detail publishers whose topic has a subscriber. One
+        graph query lists the topics; only those named in it are counted. Created entities stay (a controller
+        that restarts finds its subscription matched at once; nothing is torn down under a queued message)."""
+        try:
+            graph = {name for name, _ in self.get_topic_names_and_types()}
+        except Exception:  # noqa: BLE001 - shutting down: the next poll (if any) tries again
+            return
+        still = []
+        with self._lock:
+            for item in self._pending:
+                name, command, k, topic = item
+                if name in graph and (self.count_publishers(name) if command else self.count_subscribers(name)):
+                    self._create_joint_entity(k, topic)
+                    self.get_logger().info(f"{name}: a {'publisher' if command else 'subscriber'} appeared; "
+                                           f"{'subscribed' if command else 'publishing'} from now on")
+                else:
+                    still.append(item)
+            self._pending = still
+            if not still and self._graph_timer is not None:   # every per-joint topic exists: stop looking
+                self.destroy_timer(self._graph_timer)
+                self._graph_timer = None
 
     def _make_plant(self, joint_params, period_ns: int):
         """The actuators alone (:class:`ActuatorPlant`) or, with ``mujoco.model``, under the robot's bodies
@@ -281,7 +355,8 @@ class ActuatorNode(Node):
     def _start_timer(self) -> None:
         # created right after the anchor: the wake-ups fall a tenth of a period after each period became due
         self.scheduler.start()
-        self._timer = self.create_timer(self.scheduler.wake_period_ns * 1e-9, self._on_tick, clock=self._steady)
+        self._timer = self.create_timer(self.scheduler.wake_period_ns * 1e-9, _timer_callback(self._on_tick),
+                                        clock=self._steady)
 
     def close(self) -> None:
         """Stop stepping and finalise the recording (idempotent)."""
@@ -289,6 +364,9 @@ class ActuatorNode(Node):
             if self._timer is not None:
                 self.destroy_timer(self._timer)
                 self._timer = None
+            if self._graph_timer is not None:
+                self.destroy_timer(self._graph_timer)
+                self._graph_timer = None
             if self.recorder is not None:
                 rec, self.recorder = self.recorder, None
                 try:
@@ -329,14 +407,14 @@ class ActuatorNode(Node):
 
     def _on_tick(self) -> None:
         with self._lock:
-            if self.scheduler.finished or not self.context.ok():   # shutting down (Ctrl-C): publishing would fail
+            if self.scheduler.finished:
                 return
             try:
                 self.scheduler.tick()
             except Exception:
                 if self.context.ok():
                     raise
-                # the context was shut down (signal) in the middle of the batch: a normal stop
+                # the context was shut down (Ctrl-C, a signal): publishing failed; a normal stop
 
     def advance(self, periods: int = 1) -> None:
         """Advance ``periods`` publish periods now (public for tests, benchmarks and embedding)."""
@@ -355,8 +433,11 @@ class ActuatorNode(Node):
         publish = self._publish
         if self.pub_clock is not None:
             publish(self.pub_clock, self._m_clock, t_ns)
-        publish(self.pub_joint, self._m_joint, t_ns)
-        if detail:
+        if self.recorder is None:
+            self.pub_joint.publish(self._m_joint)
+        else:
+            publish(self.pub_joint, self._m_joint, t_ns)
+        if detail and (self._detail_all or self.pub_body is not None):   # (any detail topic created)
             now = time.monotonic_ns()
             if now >= self._next_detail_refresh:
                 self._refresh_detail(now)
@@ -397,22 +478,43 @@ class ActuatorNode(Node):
 
     def _status(self, h: Health) -> DiagnosticStatus:
         name = f"{self.get_fully_qualified_name()}: " + (h.joint if self.multi else "actuator")
-        return DiagnosticStatus(level=bytes([h.level]), name=name, message=h.message, hardware_id=h.joint,
+        return DiagnosticStatus(level=_LEVEL_BYTES[h.level], name=name, message=h.message, hardware_id=h.joint,
                                 values=[KeyValue(key=k, value=v) for k, v in h.values.items()])
 
     def diagnostic_statuses(self, outs: list[dict] | None = None) -> list[DiagnosticStatus]:
-        """One diagnostics status per joint (over the window since the last one, which this resets)."""
-        rec = self.recording_error or (str(self.node_values["node.record"]) if self.recorder else "off")
-        health = self.scheduler.health(outs, error=self.recording_error, values={"recording": rec})
-        return [self._status(h) for h in health]
+        """One diagnostics status per joint (over the window since the last one, which this resets); new
+        messages (the published ones are reused)."""
+        return [self._status(h) for h in self._health(outs)]
 
     def diagnostic_status(self, joint: int = 0) -> DiagnosticStatus:
         """The current diagnostics entry of one joint (level, message, key values); also resets the window."""
         return self.diagnostic_statuses()[joint]
 
+    def _health(self, outs: list[dict] | None):
+        rec = self.recording_error or (str(self.node_values["node.record"]) if self.recorder else "off")
+        return self.scheduler.health(outs, error=self.recording_error, values={"recording": rec})
+
     def _publish_diagnostics(self, outs: list[dict], t_ns: int) -> None:
-        msg = DiagnosticArray(status=self.diagnostic_statuses(outs))
-        msg.header.stamp = _stamp(t_ns)
+        """Publish /diagnostics: one reusable DiagnosticArray whose statuses and key values are updated in place
+        (building 12 statuses of ~20 KeyValue messages anew cost more than serialising them)."""
+        health = self._health(outs)
+        msg = self._m_diag
+        if msg is None:
+            msg = self._m_diag = DiagnosticArray(status=[self._status(h) for h in health])
+            self._diag_keys = [tuple(h.values) for h in health]
+        else:
+            keys = self._diag_keys
+            for k, (st, h) in enumerate(zip(msg.status, health)):
+                st.level = _LEVEL_BYTES[h.level]
+                st.message = h.message
+                if keys[k] == tuple(h.values):
+                    for kv, value in zip(st.values, h.values.values()):
+                        kv.value = value
+                else:   # (the set of keys changed: rebuild this status)
+                    msg.status[k] = self._status(h)
+                    keys[k] = tuple(h.values)
+        stamp = msg.header.stamp
+        stamp.sec, stamp.nanosec = divmod(t_ns, 1_000_000_000)
         self._publish(self.pub_diag, msg, t_ns)
 
     # ------------------------------------------------------------------------------------ commands
@@ -430,7 +532,8 @@ class ActuatorNode(Node):
 
     def _on_commands(self, msg: Float64MultiArray) -> None:
         """ros2_control ForwardCommandController convention: one value per joint, ``joints`` order."""
-        self._record_in(self.sub_commands, msg)
+        if self.recorder is not None:
+            self._write(self._commands_topic, msg, self.t_ns)
         with self._lock:
             self.scheduler.commands(msg.data, self._commands_topic)
             self.scheduler.lock_step_period()
@@ -583,6 +686,8 @@ are ~/<joint>/...):
        /clock (node.publish_clock), ~/mujoco/body_state (with mujoco.model: the whole multibody's qpos and
        qvel, labelled, at node.detail_rate, on demand)
 
+With joints given, each per-joint topic is created once a publisher (commands) or subscriber (detail topics)
+appears on it, checked every second (node.joint_topics:=always creates them all at start).
 Per-joint parameters: joint.<name>.preset, joint.<name>.params_file, joint.<name>.<model parameter>.
 A robot: -p mujoco.model:=robot.xml -p joint.knee.preset:=ak80_9 ... drives the MJCF model's joints (MuJoCo
 integrates the bodies; the joints are those named in joint.<name>.*, or joints:=[...]).

@@ -81,6 +81,12 @@ NODE_PARAMS: dict[str, NodeParam] = {p.name: p for p in (
               "~/[<joint>/]q_axis_state, phase_currents and temperatures; 0 = every publish period (published on "
               "demand: only while subscribed, and always while recording)",
               (0.0, 100000.0)),
+    NodeParam("node.joint_topics", str, "auto", "", "when the per-joint topics (~/[<joint>/]current_command, "
+              "torque_command, load_torque, reset_fault and the four detail topics) exist: always = from the start; "
+              "on_demand = a command subscription once a publisher on its topic appears, a detail publisher once "
+              "a subscriber appears (graph checked every second; kept from then on); auto = always for one joint, "
+              "on_demand with joints given. Recording always creates them all",
+              choices=("auto", "always", "on_demand")),
 )}
 
 #: list of joint names (string array, top level): ``-p joints:="[hip, knee, ankle]"``; empty = one joint

@@ -101,6 +101,9 @@ class ActuatorPlant:
         self._steps = [a.step_ns for a in self._list]
         self._outs = [a.outputs for a in self._list]
         self._states = [a.joint_state for a in self._list]
+        # simulation time kept here (every joint steps the same interval through step_ns): reading it from
+        # the kernel's state array every period cost more than the arithmetic
+        self._t_ns = self._list[0].t_ns
 
     @property
     def joints(self) -> list[str]:
@@ -108,10 +111,11 @@ class ActuatorPlant:
 
     @property
     def t_ns(self) -> int:
-        return self._list[0].t_ns
+        return self._t_ns
 
     def actuator(self, joint: str) -> Actuator:
-        """The joint's :class:`~bldc_actuator.model.Actuator` (state, energy ledger, ...)."""
+        """The joint's :class:`~bldc_actuator.model.Actuator` (state, energy ledger, ...). Step it only through
+        :meth:`step_ns` (the plant keeps the joints, and its clock, together)."""
         return self._acts[joint]
 
     def set_current_command(self, joint: str, i_q_ref: float) -> None:
@@ -126,6 +130,7 @@ class ActuatorPlant:
     def step_ns(self, dt_ns: int) -> None:
         for step in self._steps:
             step(dt_ns)
+        self._t_ns += int(dt_ns)
 
     def outputs(self, joint: str) -> dict:
         return self._acts[joint].outputs()

@@ -199,6 +199,9 @@ class Scheduler:
         #: while nothing subscribes to them)
         self.detail_wanted = True
         self._joint_states = getattr(plant, "joint_states", None)   # optional cheap read, see plant.py
+        #: the last ~/commands array if every element was accepted and nothing was commanded since (see
+        #: :meth:`commands`)
+        self._held: Sequence[float] | None = None
 
     def share_joint_state(self, position: array.array, velocity: array.array, effort: array.array) -> None:
         """Write every period's joint state into these ``array('d')`` (one element per joint) from now on,
@@ -255,6 +258,7 @@ class Scheduler:
             raise ValueError(f"commands_interface: expected one of {', '.join(COMMANDS_INTERFACES)}, "
                              f"got {interface!r}")
         self.config.commands_interface = interface
+        self._held = None
 
     def tick(self) -> int:
         """One wake-up: advance every period that is due by the wall clock; returns how many."""
@@ -371,6 +375,7 @@ class Scheduler:
             due = j.last_command_ns + wd
             if t >= due:
                 j.watchdog_active = True
+                self._held = None
                 self.plant.set_current_command(j.name, 0.0)
                 self.log.warning(f"command watchdog{self._for(j)}: no command for {wd * 1e-9:g} s of simulation "
                                  "time; current command set to zero until the next command")
@@ -406,6 +411,7 @@ class Scheduler:
     def command(self, j: JointCommand, kind: str, value, topic: str) -> bool:
         """Check and apply one joint's command (``kind`` "current" [A] or "torque" [N*m] at the output);
         False when rejected."""
+        self._held = None
         unit = "A" if kind == "current" else "N*m"
         try:
             v = float(value)
@@ -447,9 +453,32 @@ class Scheduler:
             self.reject(self.joints, topic, "length", f"expected {len(self.joints)} element(s) ({interface} for "
                         f"{names}), got {len(values)}")
             return
+        t = self.t_ns
+        held = self._held
+        if type(values) is type(held) and values == held:
+            # the very array accepted last time, nothing commanded since (a controller holding its output):
+            # only the counters and the watchdog's clock change
+            for j in self.joints:
+                j.commands_received += 1
+                j.last_command_ns = t
+            self.commands_received += len(self.joints)
+            return
         kind = COMMANDS_INTERFACES[interface]
+        current = kind == "current"
+        n = 0
+        accepted = True
         for j, value in zip(self.joints, values):
-            self.command(j, kind, value, topic)
+            # the same accepted command again (a controller holding its output): only the counters and the
+            # watchdog's clock change; anything else (a new value, a rejection, the watchdog) takes command()
+            if value == j.value and kind == j.kind and not j.watchdog_active and \
+                    abs(value) <= (j.current_abs_max if current else j.torque_abs_max) < math.inf:
+                j.commands_received += 1
+                j.last_command_ns = t
+                n += 1
+            else:
+                accepted = self.command(j, kind, value, topic) and accepted
+        self.commands_received += n
+        self._held = values[:] if accepted and isinstance(values, (array.array, list, tuple)) else None
 
     def joint_commands(self, names: Sequence[str], position: Sequence[float], velocity: Sequence[float],
                        effort: Sequence[float], topic: str) -> None:
@@ -495,6 +524,7 @@ class Scheduler:
     def update_params(self, j: JointCommand, params: ActuatorParams) -> None:
         self.plant.update_params(j.name, params)
         self._limits(j, params)
+        self._held = None   # (the limits changed: check the next array again)
 
     # ------------------------------------------------------------------------------------ diagnostics
 

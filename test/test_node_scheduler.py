@@ -200,3 +200,32 @@ def test_a_plant_with_a_cheap_joint_state_read_is_fully_read_only_when_needed():
     cheap.detail_wanted = True
     cheap.advance(10)
     assert cheap.plant.full_reads - reads0 == 41
+
+
+def test_a_held_commands_array_is_still_counted_watched_and_checked():
+    """The same ``~/commands`` array again (the scheduler's shortcut for a controller holding its output)
+    behaves exactly like a new one: counted per joint, keeps the watchdog fed, clears a fired watchdog
+    (the current comes back), and is checked again after a parameter change makes it absurd."""
+    from array import array
+
+    sched, plant, log = make(lock_step=True, watchdog_ns=20_000_000, commands_interface="current")
+    held = array("d", [2.0, -1.0])
+    for _ in range(30):                           # 30 ms of the same array: the watchdog never fires
+        sched.commands(array("d", held), "~/commands")
+        sched.lock_step_period()
+    hip, knee = sched.joints
+    assert hip.commands_received == knee.commands_received == 30 and sched.commands_received == 60
+    assert not hip.watchdog_active and hip.last_command_ns == sched.t_ns - 1_000_000
+    assert plant.outputs("hip")["i_q_ref"] == 2.0 and plant.outputs("knee")["i_q_ref"] == -1.0
+    sched.advance(25)                             # silence: the watchdog zeroes both currents
+    assert hip.watchdog_active and plant.outputs("hip")["i_q_ref"] == 0.0
+    sched.commands(array("d", held), "~/commands")  # the same array once more: current back, watchdog cleared
+    sched.advance(1)
+    assert not hip.watchdog_active and plant.outputs("hip")["i_q_ref"] == 2.0
+    assert plant.outputs("knee")["i_q_ref"] == -1.0 and log.having("command watchdog cleared")
+    # a current limit of 0.1 A makes 2 A absurd (> 10 x the limit): the same array is now rejected for the hip
+    sched.update_params(hip, plant.params("hip").replace(**{"drive.current_limit": 0.1}))
+    rejected = hip.commands_rejected
+    sched.commands(array("d", held), "~/commands")
+    assert hip.commands_rejected == rejected + 1 and "absurd" in hip.last_rejection
+    assert knee.commands_rejected == 0
