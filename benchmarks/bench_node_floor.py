@@ -6,7 +6,8 @@
                                                     [--baseline DIR]
 
 Conditions (what a user has under ros2_control): a controller in ANOTHER process sends ``~/commands`` (one
-effort per joint) at ``--command-rate`` (1 kHz), and a subscriber in a third process listens to
+effort per joint, a 2 Hz sine so every message differs as a controller's do; ``--command-wave square`` for
+nearly all repeats) at ``--command-rate`` (1 kHz), and a subscriber in a third process listens to
 ``joint_states`` and ``/diagnostics``. Under that same command stream, in the same run, the benchmark
 alternates ``--rounds`` times between
 
@@ -43,12 +44,12 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 
 CONTROLLER = r"""
-import sys, rclpy
+import math, sys, rclpy
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.task import Future
 from std_msgs.msg import Float64MultiArray
-n, rate = int(sys.argv[1]), float(sys.argv[2])
+n, rate, wave = int(sys.argv[1]), float(sys.argv[2]), sys.argv[3]
 rclpy.init()
 node = Node("bench_controller")
 pub = node.create_publisher(Float64MultiArray, "/bldc_actuator/commands", 10)
@@ -56,7 +57,10 @@ msg = Float64MultiArray(data=[0.0] * n)
 k = [0]
 def send():
     k[0] += 1
-    msg.data = [0.5 if (k[0] // 250) % 2 else -0.5] * n   # +-0.5 N*m square wave, 2 Hz
+    if wave == "sine":   # what a joint controller sends: every message differs (0.5 N*m, 2 Hz, phase per joint)
+        msg.data = [0.5 * math.sin(2 * math.pi * 2.0 * k[0] / rate + 0.5 * j) for j in range(n)]
+    else:                # +-0.5 N*m square wave, 2 Hz: 249 of 250 messages repeat the last one
+        msg.data = [0.5 if (k[0] // 250) % 2 else -0.5] * n
     pub.publish(msg)
 node.create_timer(1.0 / rate, send)
 ex = EventsExecutor()
@@ -203,6 +207,9 @@ def main() -> int:
     ap.add_argument("--warmup", type=float, default=5.0, help="seconds after start before measuring")
     ap.add_argument("--rounds", type=int, default=3, help="floor/node pairs")
     ap.add_argument("--command-rate", type=float, default=1000.0, help="controller's command rate [Hz]")
+    ap.add_argument("--command-wave", choices=("sine", "square"), default="sine",
+                    help="sine: every command differs, as a joint controller's do (default); square: a 2 Hz square "
+                         "wave, nearly every message a repeat (the node's held-command shortcut)")
     ap.add_argument("--node-arg", action="append", default=[], help="extra argument for actuator_node "
                     "(after its --ros-args), e.g. --node-arg=-p --node-arg=node.detail_rate:=100.0")
     ap.add_argument("--py-spy", metavar="OUT", help="profile the first node run with py-spy (on PATH) into OUT "
@@ -217,7 +224,8 @@ def main() -> int:
     args = ap.parse_args()
     args.py_spy_done = False
     env = child_env()
-    ctl = subprocess.Popen([sys.executable, "-c", CONTROLLER, str(args.joints), str(args.command_rate)], env=env,
+    ctl = subprocess.Popen([sys.executable, "-c", CONTROLLER, str(args.joints), str(args.command_rate),
+                            args.command_wave], env=env,
                            preexec_fn=niced(args))
     floor_cmd = [sys.executable, str(HERE / "floor_node.py"), "--joints", str(args.joints)]
     node_cmd = node_command(args.joints, args.node_arg)
@@ -228,7 +236,7 @@ def main() -> int:
             ap.error(f"--baseline: expected a source checkout with bldc_actuator/node.py, got {args.baseline}")
     load0 = os.getloadavg()
     print(f"bench_node_floor: {os.cpu_count()} CPUs, load average {load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}; "
-          f"{args.joints} joints (ak80_9), controller process at {args.command_rate:g} Hz on ~/commands, subscriber "
+          f"{args.joints} joints (ak80_9), controller process at {args.command_rate:g} Hz on ~/commands ({args.command_wave}), subscriber "
           f"process on joint_states + /diagnostics; EventsExecutor; {args.rounds} rounds of floor/node, "
           f"{args.seconds:g} s each after {args.warmup:g} s warm-up; node extras: {' '.join(args.node_arg) or 'none'}; "
           f"nice {args.nice}" + (f"; baseline {base_dir}" if base_dir else ""))
