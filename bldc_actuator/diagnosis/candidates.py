@@ -193,6 +193,40 @@ def col_delay(ctx):
     return {"electrical": ctx.sig["dv_dt"]}
 
 
+def compliance_filter(f_a: float, zeta: float, fs: float):
+    """Discrete ``(b, a)`` of ``H(s) = -s^2 / (s^2 + 2 zeta w_a s + w_a^2)``, ``w_a = 2 pi f_a`` (bilinear,
+    pre-warped at ``w_a`` so the anti-resonance stays where it is): the rotor acceleration's share that the load
+    behind a compliant transmission does NOT follow (see :func:`col_compliance`)."""
+    from scipy.signal import bilinear
+
+    w = 2.0 * fs * math.tan(math.pi * f_a / fs)       # pre-warped anti-resonance [rad/s]
+    return bilinear([-1.0, 0.0, 0.0], [1.0, 2.0 * zeta * w, w * w], fs)
+
+
+def col_compliance(f_a: float, zeta: float):
+    """Transmission compliance seen from the rotor alone (motor-side angle, no load encoder). The load J_l behind
+    a spring k and damper c (output side) follows the rotor through
+    ``theta_l = G theta/N``, ``G = (w_a^2 + 2 zeta w_a s)/(s^2 + 2 zeta w_a s + w_a^2)``, ``w_a = sqrt(k/J_l)``
+    (the anti-resonance), ``c = 2 zeta w_a J_l``; the spring torque on the rotor is ``J_l theta_l''/N``. Against a
+    rigid model holding the load in the rotor inertia (J_nominal = J + J_l/N^2) the mechanical residual is
+    ``(J_l/N^2) (G - 1) omega'`` = column x (reflected load inertia): for a given ``f_a`` and ``zeta`` the
+    column is the rotor acceleration through ``G - 1 = -s^2/(s^2 + 2 zeta w_a s + w_a^2)``, its coefficient the
+    load inertia reflected to the rotor, ``J_l/N^2`` [kg m^2]. Filtered per segment at the raw rate, started in
+    its steady state."""
+    def build(ctx):
+        from scipy.signal import lfilter, lfilter_zi
+
+        b, a = compliance_filter(f_a, zeta, ctx.fs)
+        x = ctx.sig["omega_dot"]
+        y = np.zeros_like(x)
+        zi = lfilter_zi(b, a)
+        for lo, hi in ctx.segments:
+            if hi > lo:
+                y[lo:hi], _ = lfilter(b, a, x[lo:hi], zi=zi * x[lo])
+        return {"mechanical": y}
+    return build
+
+
 # ------------------------------------------------------------------------------------ excitation
 
 def _frac(x):
@@ -275,6 +309,24 @@ def excite_headroom(ctx):
         return "needs voltage_q"
     h = ctx.dsig("headroom")
     return None if _frac(h > 0.9) > 0.005 else "needs operation near the voltage limit (|v|/v_max > 0.9)"
+
+
+def excite_compliance(ctx):
+    """A two-mass shows where the rotor's motion has content near the anti-resonance: acceleration with a part
+    above a few hertz, inside the equation error's band."""
+    if ctx.params.gear.transmission_stiffness > 0.0:
+        return "the nominal parameters already hold a compliant transmission (gear.transmission_stiffness > 0)"
+    if ctx.steady:
+        return "needs transient motion (a steady-state recording)"
+    a = ctx.dsig("omega_dot")
+    if not np.std(a) > 0:
+        return "needs acceleration"
+    if compliance_band(ctx) is None:
+        return f"needs a log fast enough to show a resonance (equation-error band up to {ctx.dec.fc:.3g} Hz)"
+    fast = a - ctx.dec.lowpass(ctx.sig["omega_dot"], COMPLIANCE_MIN_HZ)[ctx.dec.idx]
+    share = float(np.var(fast) / np.var(a))
+    return None if share > 0.01 else (f"needs motion with content above {COMPLIANCE_MIN_HZ:g} Hz (the acceleration "
+                                      f"holds {100 * share:.2g} % of its variance there)")
 
 
 def excite_dead_time(ctx):
@@ -361,6 +413,100 @@ def col_eripple(order, which, kind):
             out["mechanical"] = b
         return out
     return build
+
+
+#: lowest anti-resonance [Hz] the compliance candidate looks for (below it a load follows its rotor like a rigid one
+#: over any useful motion); the highest is a fraction of the equation error's band
+COMPLIANCE_MIN_HZ = 3.0
+COMPLIANCE_TOP_OF_BAND = 0.7
+
+
+def compliance_band(ctx) -> tuple[float, float] | None:
+    """(lowest, highest) anti-resonance [Hz] the recording can show, or None."""
+    hi = COMPLIANCE_TOP_OF_BAND * min(ctx.dec.fc, 0.4 * ctx.fs)
+    return (COMPLIANCE_MIN_HZ, hi) if hi > 2.0 * COMPLIANCE_MIN_HZ else None
+
+
+def _compliance_rss(ctx):
+    """``rss(f_a, zeta) -> (rss, coefficient)``: the nominal mechanical residual (training rows) fitted by the
+    compliance column (with the always-fitted nuisance columns), the column filtered at the DECIMATED rate from the
+    decimated acceleration (both linear: a quick stand-in for the raw-rate column, for the search only)."""
+    from scipy.signal import lfilter, lfilter_zi
+
+    B = ctx.blocks["mechanical"]
+    rows = ctx.train_rows("mechanical")
+    y = B.target[rows]
+    K = np.broadcast_to(np.asarray(ctx.sig["K"], float), ctx.sig["omega_dot"].shape)
+    x = ctx.dec.apply(ctx.sig["omega_dot"] / K)
+    fs_dec = ctx.fs / max(ctx.dec.q, 1)
+    runs = np.flatnonzero(np.diff(ctx.dec.seg_of)) + 1
+    bounds = list(zip(np.r_[0, runs], np.r_[runs, len(x)]))
+    nuis = [ctx.column(k, b).get("mechanical") for k, b in ctx.nuisance.items()]
+    X0 = [c[rows] for c in nuis if c is not None]
+
+    def rss(f_a, zeta):
+        if not 0.0 < f_a < 0.45 * fs_dec:
+            return float("inf"), 0.0
+        b, a = compliance_filter(f_a, zeta, fs_dec)
+        col = np.zeros_like(x)
+        zi = lfilter_zi(b, a)
+        for lo, hi in bounds:
+            col[lo:hi], _ = lfilter(b, a, x[lo:hi], zi=zi * x[lo])
+        X = np.column_stack([col[rows]] + X0)
+        beta, *_ = np.linalg.lstsq(X, y, rcond=None)
+        r = y - X @ beta
+        return float(r @ r), float(beta[0])
+    return rss
+
+
+#: anti-resonances tried before refining (log-spaced over the band) and damping ratios
+COMPLIANCE_GRID = 48
+COMPLIANCE_ZETA_GRID = (0.02, 0.05, 0.1, 0.2, 0.4)
+#: local minima of the grid refined and offered as forms
+COMPLIANCE_FORMS = 2
+
+
+def v_compliance(ctx, loc):
+    """The anti-resonance (``f_a``) and its damping ratio searched on the nominal residual: a log grid over
+    :func:`compliance_band` x :data:`COMPLIANCE_ZETA_GRID` (a lightly damped two-mass is a narrow valley in
+    ``f_a``, so a coarse grid misses it by tens of percent), its best local minima (with a positive load inertia)
+    refined jointly in (log f_a, log zeta) by Nelder-Mead; each is one form, its ``f_a`` refined again in the
+    final fit (beside the other accepted effects)."""
+    from scipy.optimize import minimize
+
+    band = compliance_band(ctx)
+    if band is None or "mechanical" not in ctx.blocks:
+        return []
+    lo, hi = band
+    rss = _compliance_rss(ctx)
+    fs = np.geomspace(lo, hi, COMPLIANCE_GRID)
+    table = np.array([[rss(float(f), z) for z in COMPLIANCE_ZETA_GRID] for f in fs])   # (f, zeta, [rss, coef])
+    val = np.where(table[:, :, 1] > 0, table[:, :, 0], np.inf)
+    best_z = np.argmin(val, axis=1)
+    curve = val[np.arange(len(fs)), best_z]
+    minima = [i for i in range(len(fs)) if np.isfinite(curve[i])
+              and (i == 0 or curve[i] <= curve[i - 1]) and (i == len(fs) - 1 or curve[i] <= curve[i + 1])]
+    minima = sorted(minima, key=lambda i: curve[i])[:COMPLIANCE_FORMS]
+    out = []
+    for i in minima:
+        x0 = np.array([math.log(fs[i]), math.log(COMPLIANCE_ZETA_GRID[best_z[i]])])
+
+        def cost(v):
+            f, z = math.exp(v[0]), math.exp(min(max(v[1], math.log(0.005)), math.log(1.0)))
+            r, c = rss(f, z)
+            return r if c > 0 else r + abs(r)
+
+        res = minimize(cost, x0, method="Nelder-Mead", options={"xatol": 0.002, "fatol": 1e-9 * curve[i],
+                                                                 "maxiter": 200, "initial_simplex":
+                                                                 np.array([x0, x0 + [0.04, 0.0], x0 + [0.0, 0.3]])})
+        f = float(min(max(math.exp(res.x[0]), 0.5 * lo), 1.2 * hi))
+        zeta = float(min(max(math.exp(res.x[1]), 0.005), 1.0))
+        key = f"compliance@{f:.6g},{zeta:.4g}"
+        out.append(Variant("transmission_compliance", f"anti-resonance {f:.3g} Hz, damping ratio {zeta:.2g}",
+                           {key: col_compliance(f, zeta)}, hyper={"f_a": f, "zeta": zeta},
+                           nonlinear={"f_a": (f, f / 1.15, f * 1.15,
+                                              lambda c, v, key=key, zeta=zeta: {key: col_compliance(v, zeta)})}))
+    return out
 
 
 def v_eripple(ctx, loc):
@@ -562,6 +708,33 @@ def params_kt(coef, cov, keys, variant, ctx):
             "frame_factor": {"value": match_frame_factor(ratio, sd), "sd": 0.0, "unit": "", "field": None}}
 
 
+def params_compliance(coef, cov, keys, variant, ctx):
+    """The column's coefficient is the load inertia reflected to the rotor, ``J_l/N^2`` [kg m^2]; with the
+    anti-resonance ``f_a`` (refined, in ``variant.hyper``) and damping ratio: ``J_l``, ``k = (2 pi f_a)^2 J_l``,
+    ``c = 2 zeta (2 pi f_a) J_l`` (output side), and the rotor side's own inertia, the nominal one less ``J_l/N^2``
+    (written by :func:`bldc_actuator.diagnosis.refit.updated_params`, so an inertia finding composes with it)."""
+    N = ctx.params.gear.gear_ratio
+    j_ref = float(coef[0])
+    sd = _sd(cov, 0)
+    f_a, zeta = float(variant.hyper["f_a"]), float(variant.hyper["zeta"])
+    w_a = 2.0 * math.pi * f_a
+    J_l = j_ref * N * N
+    j_m = ctx.params.motor.rotor_inertia - j_ref
+    f_r = f_a * math.sqrt(1.0 + j_ref / j_m) if j_m > 0 and j_ref > 0 else float("nan")
+    rel = sd / abs(j_ref) if j_ref else float("nan")
+    ok = j_ref > 0.0
+    return {"load_inertia_reflected": {"value": j_ref, "sd": sd, "unit": "kg*m^2", "field": None},
+            "load_inertia": {"value": J_l, "sd": sd * N * N, "unit": "kg*m^2", "field": "gear.load_inertia" if ok else None},
+            "transmission_stiffness": {"value": w_a * w_a * J_l, "sd": w_a * w_a * J_l * rel, "unit": "N*m/rad",
+                                       "field": "gear.transmission_stiffness" if ok else None},
+            "transmission_damping": {"value": 2.0 * zeta * w_a * J_l, "sd": 2.0 * zeta * w_a * J_l * rel,
+                                     "unit": "N*m*s/rad", "field": "gear.transmission_damping" if ok else None},
+            "rotor_inertia_motor_side": {"value": j_m, "sd": sd, "unit": "kg*m^2", "field": None},
+            "antiresonance_frequency": {"value": f_a, "sd": float("nan"), "unit": "Hz", "field": None},
+            "resonance_frequency": {"value": f_r, "sd": float("nan"), "unit": "Hz", "field": None},
+            "damping_ratio": {"value": zeta, "sd": float("nan"), "unit": "", "field": None}}
+
+
 def params_r_temp(coef, cov, keys, variant, ctx):
     m = ctx.params.motor
     a0 = m.copper_temperature_coefficient if m.resistance_temperature_enabled else 0.0
@@ -635,6 +808,13 @@ def library() -> dict[str, Candidate]:
                   v_single("inertia_error", {"inertia": col_inertia}), excite_inertia,
                   params_generic({"inertia": ("rotor_inertia", "kg*m^2", "motor.rotor_inertia",
                                               _flat("motor.rotor_inertia"))})))
+    add(Candidate("transmission_compliance", ("mechanical",), mech_needs,
+                  "a compliant transmission (shaft, belt, harmonic drive, series-elastic spring): the load is a second "
+                  "mass on a spring, a two-mass resonance in the rotor's motion", True,
+                  {"inertia_error": "excite near the resonance (a chirp or steps): a rigid inertia error scales the "
+                   "acceleration at every frequency, a compliance only above the anti-resonance",
+                   "current_loop_delay": "a load encoder (joint side) measures the deflection directly"},
+                  v_compliance, excite_compliance, params_compliance))
     add(Candidate("resistance_error", ("electrical",), ("voltage_q", "current", "velocity|position"),
                   "the winding resistance is off (at the reference temperature)", True,
                   {"resistance_temperature": "hold a current while the winding warms, with winding temperature "
@@ -861,6 +1041,11 @@ def implausible(cand: Candidate, coef, cov, keys, variant: Variant, ctx) -> str 
     v, sd = val("delay")
     if v is not None:
         checks.append((abs(v) <= 2e-3, f"delay {1e3 * v:.3g} ms beyond 2 ms"))
+    v, sd = val("load_inertia_reflected")
+    if v is not None:
+        checks.append((v - 3.0 * sd > 0.0, f"reflected load inertia {v:.3g} ± {sd:.2g} kg*m^2 not above 0"))
+        checks.append((v < 0.95 * m.rotor_inertia, f"reflected load inertia {v:.3g} kg*m^2 leaves no rotor inertia "
+                       f"(nominal total {m.rotor_inertia:.3g})"))
     v, sd = val("kt_saturation")
     if v is not None:
         i_max = float(np.percentile(np.abs(ctx.dsig("i_q")), 99.5))
