@@ -380,6 +380,43 @@ def transmission(c, s, num, den, w0, h, tau_L):
 
 
 @jit
+def load_follow(th_in, w_in, t, k_over_J, c_over_J, half, th_l0, w_l0, th_l, w_l):
+    """The load behind a compliant transmission when the rotor's motion is GIVEN (a recording's): ``th_in``,
+    ``w_in`` = rotor angle and speed divided by the gear ratio [rad, rad/s, output side] at the times ``t`` [s];
+    the load's ``J_l theta_l'' = k dz(delta) + c d(delta)/dt`` (0 inside the backlash, ``half`` each side),
+    ``delta = th_in - theta_l``, with the stiffness and damping per load inertia ``k_over_J`` [1/s^2],
+    ``c_over_J`` [1/s]. The same implicit midpoint as :func:`transmission` (the rotor angle at the interval's
+    midpoint, its mean speed the angle's change over the interval; the contact state at the mid-interval
+    deflection, corrected at most twice). Starts at ``th_l0``, ``w_l0``; writes ``th_l``, ``w_l`` in place."""
+    th_l[0] = th_l0
+    w_l[0] = w_l0
+    for i in range(len(t) - 1):
+        h = t[i + 1] - t[i]
+        x0, u0 = th_l[i], w_l[i]
+        if not h > 0.0:
+            th_l[i + 1] = x0
+            w_l[i + 1] = u0
+            continue
+        r_m = (th_in[i + 1] - th_in[i]) / h
+        m_mid = 0.5 * (th_in[i] + th_in[i + 1])
+        dm = m_mid - x0 - 0.5 * h * u0
+        side = 1.0 if dm > half else (-1.0 if dm < -half else 0.0)
+        u = u0
+        for _ in range(3):
+            ke = k_over_J if side != 0.0 else 0.0
+            ce = c_over_J if side != 0.0 else 0.0
+            # 2 (u - u0)/h = ke (m_mid - x0 - h u/2 - off) + ce (r_m - u)
+            u = (2.0 * u0 / h + ke * (m_mid - x0 - side * half) + ce * r_m) / (2.0 / h + 0.5 * h * ke + ce)
+            dm = m_mid - x0 - 0.5 * h * u
+            now = 1.0 if dm > half else (-1.0 if dm < -half else 0.0)
+            if now == side:
+                break
+            side = now
+        th_l[i + 1] = x0 + h * u
+        w_l[i + 1] = 2.0 * u - u0
+
+
+@jit
 def advance(c, s, h_ns):
     """Advance the plant by ``h_ns`` [ns] with the held voltage ``s.v``."""
     h = h_ns * 1e-9

@@ -61,11 +61,13 @@ def test_rigid_joint_gets_no_compliance_finding():
     assert [f["effect"] for f in rep.to_dict()["findings"]] == []
 
 
-def test_load_state_estimated_from_the_rotor_matches_the_simulated_load():
-    """The replay's window starts: the load's angle and speed filtered from the rotor's recorded motion
-    (diagnosis.transmission.load_trajectory) agree with the simulator's own load state once the start
-    transient has decayed (5 / (zeta w_a) = 0.6 s)."""
-    act = Actuator(TRUTH)
+@pytest.mark.parametrize("backlash", [0.0, 0.004])
+def test_load_state_estimated_from_the_rotor_matches_the_simulated_load(backlash):
+    """The replay's window starts: the load's angle and speed followed from the rotor's recorded motion at 1 kHz
+    (diagnosis.transmission.load_trajectory through kernel.load_follow) agree with the simulator's own load state
+    once the start transient has decayed (5 / (zeta w_a) = 0.6 s); with a backlash too."""
+    truth = TRUTH.replace(**{"gear.backlash": backlash})
+    act = Actuator(truth)
     dt = 1e-3
     n = 3000
     th, w, th_l, w_l = (np.empty(n) for _ in range(4))
@@ -77,7 +79,7 @@ def test_load_state_estimated_from_the_rotor_matches_the_simulated_load():
         act.set_current_command(2.0 * math.sin(2 * math.pi * (3.0 * t + 4.0 * t * t)))
         act.step(dt)
     t = np.arange(n) * dt
-    est_th, est_w = load_trajectory(th, w, t, [(0, n)], TRUTH)
+    est_th, est_w = load_trajectory(th, w, t, [(0, n)], truth)
     late = t > 1.0
     defl = th / N - th_l
     assert np.ptp(defl[late]) > 1e-3
