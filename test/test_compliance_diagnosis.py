@@ -88,3 +88,18 @@ def test_load_state_estimated_from_the_rotor_matches_the_simulated_load(backlash
     # rigid parameters: the rigid position
     r_th, r_w = load_trajectory(th, w, t, [(0, n)], NOMINAL)
     np.testing.assert_array_equal(r_th, th / N)
+
+
+def test_compliance_column_filter_is_the_load_decoupling_response():
+    """The column's discrete filter: -s^2/(s^2 + 2 zeta w_a s + w_a^2) — gain 0 at DC (a slow load follows the
+    rotor), 1/(2 zeta) at the anti-resonance (exact: pre-warped), -> 1 far above it (the load stands still)."""
+    from scipy.signal import freqz
+
+    from bldc_actuator.diagnosis.candidates import compliance_filter
+
+    fs = 1000.0
+    b, a = compliance_filter(F_A, ZETA, fs)
+    _, h = freqz(b, a, worN=[1e-3, F_A, 400.0], fs=fs)
+    assert abs(h[0]) < 1e-8
+    assert abs(h[1]) == pytest.approx(1 / (2 * ZETA), rel=1e-9)
+    assert abs(h[2]) == pytest.approx(1.0, rel=0.02)

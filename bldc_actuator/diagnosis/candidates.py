@@ -197,10 +197,11 @@ def compliance_filter(f_a: float, zeta: float, fs: float):
     """Discrete ``(b, a)`` of ``H(s) = -s^2 / (s^2 + 2 zeta w_a s + w_a^2)``, ``w_a = 2 pi f_a`` (bilinear,
     pre-warped at ``w_a`` so the anti-resonance stays where it is): the rotor acceleration's share that the load
     behind a compliant transmission does NOT follow (see :func:`col_compliance`)."""
-    from scipy.signal import bilinear
-
     w = 2.0 * fs * math.tan(math.pi * f_a / fs)       # pre-warped anti-resonance [rad/s]
-    return bilinear([-1.0, 0.0, 0.0], [1.0, 2.0 * zeta * w, w * w], fs)
+    k = 2.0 * fs                                      # s = k (1 - 1/z) / (1 + 1/z)
+    kk, dz, ww = k * k, 2.0 * zeta * w * k, w * w
+    a0 = kk + dz + ww
+    return (np.array([-kk, 2.0 * kk, -kk]) / a0, np.array([1.0, (2.0 * ww - 2.0 * kk) / a0, (kk - dz + ww) / a0]))
 
 
 def col_compliance(f_a: float, zeta: float):
