@@ -193,6 +193,25 @@ def col_delay(ctx):
     return {"electrical": ctx.sig["dv_dt"]}
 
 
+def col_deflection(kind):
+    """Columns of the transmission torque on the rotor measured by two encoders (rotor ``theta`` and load
+    ``theta_load``, the load's at the output): ``tau_s/N = (k delta + c d(delta)/dt + offset)/N``,
+    ``delta = theta/N - theta_load``; ``kind`` = ``k`` (delta/N), ``c`` (d(delta)/dt / N), ``offset`` (1/N: the
+    two encoders' zeros differ by an unknown angle, k times it a constant torque), ``inertia`` (-omega': the load
+    the rigid model held in the rotor inertia)."""
+    def build(ctx):
+        S = ctx.sig
+        N = ctx.params.gear.gear_ratio
+        if kind == "inertia":
+            return {"mechanical": -S["omega_dot"]}
+        if kind == "offset":
+            return {"mechanical": np.full(len(ctx.t), 1.0 / N)}
+        if kind == "k":
+            return {"mechanical": (S["theta"] / N - S["theta_load"]) / N}
+        return {"mechanical": (S["omega"] / N - S["omega_load"]) / N}
+    return build
+
+
 def compliance_filter(f_a: float, zeta: float, fs: float):
     """Discrete ``(b, a)`` of ``H(s) = -s^2 / (s^2 + 2 zeta w_a s + w_a^2)``, ``w_a = 2 pi f_a`` (bilinear,
     pre-warped at ``w_a`` so the anti-resonance stays where it is): the rotor acceleration's share that the load
@@ -479,6 +498,10 @@ def v_compliance(ctx, loc):
     final fit (beside the other accepted effects)."""
     from scipy.optimize import minimize
 
+    if "theta_load" in ctx.sig and "mechanical" in ctx.blocks:
+        return [Variant("transmission_compliance", "from the rotor and load encoders (deflection measured)",
+                        {"tr_k": col_deflection("k"), "tr_c": col_deflection("c"), "tr_j": col_deflection("inertia"),
+                         "tr_0": col_deflection("offset")}, hyper={"kind": "encoders"})]
     band = compliance_band(ctx)
     if band is None or "mechanical" not in ctx.blocks:
         return []
@@ -721,6 +744,8 @@ def params_compliance(coef, cov, keys, variant, ctx):
     ``c = 2 zeta (2 pi f_a) J_l`` (output side), and the rotor side's own inertia, the nominal one less ``J_l/N^2``
     (written by :func:`bldc_actuator.diagnosis.refit.updated_params`, so an inertia finding composes with it)."""
     N = ctx.params.gear.gear_ratio
+    if variant.hyper.get("kind") == "encoders":     # two encoders: k, c and the load inertia fitted directly
+        return _params_compliance_encoders(coef, cov, keys, ctx)
     j_ref = float(coef[0])
     sd = _sd(cov, 0)
     f_a, zeta = float(variant.hyper["f_a"]), float(variant.hyper["zeta"])
@@ -740,6 +765,28 @@ def params_compliance(coef, cov, keys, variant, ctx):
             "antiresonance_frequency": {"value": f_a, "sd": float("nan"), "unit": "Hz", "field": None},
             "resonance_frequency": {"value": f_r, "sd": float("nan"), "unit": "Hz", "field": None},
             "damping_ratio": {"value": zeta, "sd": float("nan"), "unit": "", "field": None}}
+
+
+def _params_compliance_encoders(coef, cov, keys, ctx):
+    N = ctx.params.gear.gear_ratio
+    c = dict(zip(keys, (float(x) for x in coef)))
+    ik, ic, ij = keys.index("tr_k"), keys.index("tr_c"), keys.index("tr_j")
+    k, damp, j_ref = c["tr_k"], c["tr_c"], c["tr_j"]
+    J_l = j_ref * N * N
+    ok = k > 0.0 and j_ref > 0.0
+    j_m = ctx.params.motor.rotor_inertia - j_ref
+    f_a = math.sqrt(k / J_l) / (2.0 * math.pi) if ok else float("nan")
+    f_r = f_a * math.sqrt(1.0 + j_ref / j_m) if ok and j_m > 0 else float("nan")
+    return {"load_inertia_reflected": {"value": j_ref, "sd": _sd(cov, ij), "unit": "kg*m^2", "field": None},
+            "load_inertia": {"value": J_l, "sd": _sd(cov, ij) * N * N, "unit": "kg*m^2",
+                             "field": "gear.load_inertia" if ok else None},
+            "transmission_stiffness": {"value": k, "sd": _sd(cov, ik), "unit": "N*m/rad",
+                                       "field": "gear.transmission_stiffness" if ok else None},
+            "transmission_damping": {"value": damp, "sd": _sd(cov, ic), "unit": "N*m*s/rad",
+                                     "field": "gear.transmission_damping" if ok and damp >= 0.0 else None},
+            "rotor_inertia_motor_side": {"value": j_m, "sd": _sd(cov, ij), "unit": "kg*m^2", "field": None},
+            "antiresonance_frequency": {"value": f_a, "sd": float("nan"), "unit": "Hz", "field": None},
+            "resonance_frequency": {"value": f_r, "sd": float("nan"), "unit": "Hz", "field": None}}
 
 
 def params_r_temp(coef, cov, keys, variant, ctx):
