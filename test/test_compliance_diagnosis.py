@@ -160,3 +160,19 @@ def test_two_encoders_on_a_rigid_joint_find_nothing():
     quantisation): no compliance finding."""
     rep = diagnose(_two_encoder_recording(NOMINAL, NOMINAL), NOMINAL)
     assert [f["effect"] for f in rep.to_dict()["findings"]] == []
+
+
+def test_two_encoders_name_the_backlash_and_write_it():
+    """A 4 mrad backlash (output side) behind the same spring, seen by both encoders: the dead zone's width and
+    centre searched on the deflection, k and the load inertia fitted with it, judged by simulation (the replay
+    windows start from the load encoder's reading) and written to gear.backlash."""
+    truth = TRUTH.replace(**{"gear.backlash": 0.004})
+    rep = diagnose(_two_encoder_recording(truth, NOMINAL), NOMINAL)
+    d = rep.to_dict()
+    assert [f["effect"] for f in d["findings"]] == ["transmission_compliance"], d["verdict"]
+    f = d["findings"][0]
+    assert "backlash" in f["form"]
+    assert f["parameters"]["backlash"] == pytest.approx(0.004, rel=0.1)
+    assert f["parameters"]["transmission_stiffness"] == pytest.approx(K_TR, rel=0.1)
+    assert f["simulation"]["verdict"] == "confirmed"
+    assert rep.updated_params.gear.backlash == pytest.approx(0.004, rel=0.1)

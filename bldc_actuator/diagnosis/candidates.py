@@ -193,12 +193,14 @@ def col_delay(ctx):
     return {"electrical": ctx.sig["dv_dt"]}
 
 
-def col_deflection(kind):
+def col_deflection(kind, half: float = 0.0, zero: float = 0.0):
     """Columns of the transmission torque on the rotor measured by two encoders (rotor ``theta`` and load
     ``theta_load``, the load's at the output): ``tau_s/N = (k delta + c d(delta)/dt + offset)/N``,
     ``delta = theta/N - theta_load``; ``kind`` = ``k`` (delta/N), ``c`` (d(delta)/dt / N), ``offset`` (1/N: the
     two encoders' zeros differ by an unknown angle, k times it a constant torque), ``inertia`` (-omega': the load
-    the rigid model held in the rotor inertia)."""
+    the rigid model held in the rotor inertia). With a backlash (``half`` its half width [rad, output side], ``zero``
+    the encoders' offset, the dead zone's centre) the spring columns are ``dz(delta - zero)/N`` and the damping's
+    only in contact, as the kernel's (:func:`bldc_actuator.kernel.backlash_deflection`)."""
     def build(ctx):
         S = ctx.sig
         N = ctx.params.gear.gear_ratio
@@ -206,9 +208,12 @@ def col_deflection(kind):
             return {"mechanical": -S["omega_dot"]}
         if kind == "offset":
             return {"mechanical": np.full(len(ctx.t), 1.0 / N)}
+        d = S["theta"] / N - S["theta_load"] - zero
+        contact = np.abs(d) > half
         if kind == "k":
-            return {"mechanical": (S["theta"] / N - S["theta_load"]) / N}
-        return {"mechanical": (S["omega"] / N - S["omega_load"]) / N}
+            return {"mechanical": (np.sign(d) * np.maximum(np.abs(d) - half, 0.0) if half > 0 else d) / N}
+        rate = S["omega"] / N - S["omega_load"]
+        return {"mechanical": (rate * contact if half > 0 else rate) / N}
     return build
 
 
@@ -445,6 +450,74 @@ COMPLIANCE_MIN_HZ = 3.0
 COMPLIANCE_TOP_OF_BAND = 0.4
 
 
+#: the backlash form (two encoders) is offered when it lowers the linear form's training residual by at least this
+#: fraction, with a dead zone wider than this many load-encoder steps
+BACKLASH_MIN_GAIN = 0.1
+BACKLASH_MIN_STEPS = 2.0
+
+
+def _encoder_backlash(ctx) -> Variant | None:
+    """Backlash seen by two encoders: the dead zone's half width (log grid from two load-encoder steps to 0.05 rad)
+    and centre (the encoders' zero offset, from the linear fit, refined on a small grid) that fit the training
+    residual best with the spring, damping, inertia and offset columns; offered when it beats the linear form by
+    :data:`BACKLASH_MIN_GAIN`."""
+    B = ctx.blocks["mechanical"]
+    rows = ctx.train_rows("mechanical")
+    y = B.target[rows]
+    nuis = [ctx.column(k, b).get("mechanical") for k, b in ctx.nuisance.items()]
+    X0 = [c[rows] for c in nuis if c is not None]
+    cache = {}
+
+    def dec(kind, half=0.0, zero=0.0):
+        key = (kind, half, zero)
+        if key not in cache:
+            cache[key] = ctx._build(col_deflection(kind, half, zero))["mechanical"][rows]   # noqa: SLF001
+        return cache[key]
+
+    def fit(half, zero):
+        X = np.column_stack([dec("k", half, zero), dec("c", half, zero), dec("inertia"), dec("offset")] + X0)
+        beta, *_ = np.linalg.lstsq(X, y, rcond=None)
+        r = y - X @ beta
+        return float(r @ r), beta
+
+    base, beta = fit(0.0, 0.0)
+    if not beta[0] > 0:
+        return None
+    zero0 = -float(beta[3]) / float(beta[0])      # k (delta - zero) = k delta + offset
+    th_l = ctx.sig["theta_load"]
+    steps = np.abs(np.diff(th_l))
+    steps = steps[steps > 0]
+    lo = max(BACKLASH_MIN_STEPS * (float(np.min(steps)) if len(steps) else 0.0), 1e-5)
+    best = (base, 0.0, zero0)
+    for half in np.geomspace(lo, 0.05, 12):
+        for dz in (-0.5, -0.25, 0.0, 0.25, 0.5):
+            r, b = fit(float(half), zero0 + dz * float(half))
+            if b[0] > 0 and r < best[0]:
+                best = (r, float(half), zero0 + dz * float(half))
+    if not best[1] > 0 or best[0] > (1.0 - BACKLASH_MIN_GAIN) * base:
+        return None
+    from scipy.optimize import minimize
+
+    _, h0, z0 = best
+
+    def cost(v):
+        half, zero = h0 * math.exp(v[0]), z0 + h0 * v[1]
+        if half < lo:
+            return float("inf")
+        r, b = fit(half, zero)
+        return r if b[0] > 0 else float("inf")
+
+    res = minimize(cost, np.zeros(2), method="Nelder-Mead",
+                   options={"xatol": 1e-3, "maxiter": 80, "initial_simplex": np.array([[0, 0], [0.2, 0], [0, 0.2]])})
+    half, zero = (h0 * math.exp(res.x[0]), z0 + h0 * res.x[1]) if res.fun < best[0] else (h0, z0)
+    tag = f"@{half:.6g},{zero:.6g}"      # its own column keys (columns are cached by key)
+    return Variant("transmission_compliance",
+                   f"from the rotor and load encoders, backlash {1e3 * 2 * half:.3g} mrad",
+                   {"tr_k" + tag: col_deflection("k", half, zero), "tr_c" + tag: col_deflection("c", half, zero),
+                    "tr_j": col_deflection("inertia"), "tr_0": col_deflection("offset")},
+                   hyper={"kind": "encoders", "backlash": 2.0 * half})
+
+
 def compliance_band(ctx) -> tuple[float, float] | None:
     """(lowest, highest) anti-resonance [Hz] the recording can show, or None."""
     hi = COMPLIANCE_TOP_OF_BAND * min(ctx.dec.fc, 0.4 * ctx.fs)
@@ -499,9 +572,11 @@ def v_compliance(ctx, loc):
     from scipy.optimize import minimize
 
     if "theta_load" in ctx.sig and "mechanical" in ctx.blocks:
-        return [Variant("transmission_compliance", "from the rotor and load encoders (deflection measured)",
-                        {"tr_k": col_deflection("k"), "tr_c": col_deflection("c"), "tr_j": col_deflection("inertia"),
-                         "tr_0": col_deflection("offset")}, hyper={"kind": "encoders"})]
+        out = [Variant("transmission_compliance", "from the rotor and load encoders (deflection measured)",
+                       {"tr_k": col_deflection("k"), "tr_c": col_deflection("c"), "tr_j": col_deflection("inertia"),
+                        "tr_0": col_deflection("offset")}, hyper={"kind": "encoders"})]
+        bl = _encoder_backlash(ctx)
+        return out + ([bl] if bl is not None else [])
     band = compliance_band(ctx)
     if band is None or "mechanical" not in ctx.blocks:
         return []
@@ -745,7 +820,12 @@ def params_compliance(coef, cov, keys, variant, ctx):
     (written by :func:`bldc_actuator.diagnosis.refit.updated_params`, so an inertia finding composes with it)."""
     N = ctx.params.gear.gear_ratio
     if variant.hyper.get("kind") == "encoders":     # two encoders: k, c and the load inertia fitted directly
-        return _params_compliance_encoders(coef, cov, keys, ctx)
+        out = _params_compliance_encoders(coef, cov, keys, ctx)
+        if "backlash" in variant.hyper:
+            ok = out["transmission_stiffness"]["field"] is not None
+            out["backlash"] = {"value": float(variant.hyper["backlash"]), "sd": float("nan"), "unit": "rad",
+                               "field": "gear.backlash" if ok else None}
+        return out
     j_ref = float(coef[0])
     sd = _sd(cov, 0)
     f_a, zeta = float(variant.hyper["f_a"]), float(variant.hyper["zeta"])
@@ -769,9 +849,10 @@ def params_compliance(coef, cov, keys, variant, ctx):
 
 def _params_compliance_encoders(coef, cov, keys, ctx):
     N = ctx.params.gear.gear_ratio
-    c = dict(zip(keys, (float(x) for x in coef)))
-    ik, ic, ij = keys.index("tr_k"), keys.index("tr_c"), keys.index("tr_j")
-    k, damp, j_ref = c["tr_k"], c["tr_c"], c["tr_j"]
+    ik = next(i for i, key in enumerate(keys) if key.startswith("tr_k"))
+    ic = next(i for i, key in enumerate(keys) if key.startswith("tr_c"))
+    ij = keys.index("tr_j")
+    k, damp, j_ref = float(coef[ik]), float(coef[ic]), float(coef[ij])
     J_l = j_ref * N * N
     ok = k > 0.0 and j_ref > 0.0
     j_m = ctx.params.motor.rotor_inertia - j_ref

@@ -51,15 +51,25 @@ def load_trajectory(theta: np.ndarray, omega: np.ndarray, t: np.ndarray, segment
 
 def window_load_states(ctx, plist: list[ActuatorParams], starts) -> tuple[np.ndarray, np.ndarray]:
     """The load's ``(theta_load_out, omega_load_out)`` at the window starts ``starts`` (one per parameter set of
-    ``plist``), estimated from the recorded rotor motion (:func:`load_trajectory`, once per distinct transmission)."""
+    ``plist``): measured when a load encoder was recorded (``load_position``, its zero moved onto the rotor's by
+    the median deflection), else estimated from the recorded rotor motion (:func:`load_trajectory`, once per
+    distinct transmission)."""
     starts = np.asarray(starts, int)
     S = ctx.sig
     th_out = np.empty(len(plist))
     w_out = np.empty(len(plist))
     cache: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+    if "theta_load" in S:       # a load encoder: its (low-passed) reading, the two encoders' zero offset removed
+        key = ("measured",)
+        N0 = plist[0].gear.gear_ratio if plist else 1.0
+        offset = float(np.median(S["theta"] / N0 - S["theta_load"]))
+        cache[key] = (ctx.dec.lowpass(S["theta_load"]) + offset, ctx.dec.lowpass(S["omega_load"]))
     for j, p in enumerate(plist):
         g = p.gear
-        key = (g.gear_ratio, g.transmission_stiffness, g.transmission_damping, g.load_inertia, p.load.load_torque)
+        key = (g.gear_ratio, g.transmission_stiffness, g.transmission_damping, g.load_inertia, p.load.load_torque,
+               g.backlash)
+        if "theta_load" in S and g.transmission_stiffness > 0.0:
+            key = ("measured",)
         if key not in cache:
             cache[key] = load_trajectory(S["theta"], S["omega_s"], ctx.t, ctx.segments, p)
         th_l, w_l = cache[key]
