@@ -471,7 +471,9 @@ def _encoder_backlash(ctx) -> Variant | None:
     def dec(kind, half=0.0, zero=0.0):
         key = (kind, half, zero)
         if key not in cache:
-            cache[key] = ctx._build(col_deflection(kind, half, zero))["mechanical"][rows]   # noqa: SLF001
+            raw = col_deflection(kind, half, zero)(ctx)["mechanical"]
+            # decimated in current units, as the equation-error columns are (a search: not cached in the context)
+            cache[key] = ctx.dec.apply(np.nan_to_num(raw / ctx.sig["K"]))[rows]
         return cache[key]
 
     def fit(half, zero):
