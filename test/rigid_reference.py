@@ -2,7 +2,8 @@
 wrote to ``test/data/rigid_reference_d770331.npz`` (``python test/rigid_reference.py OUT.npz``, once per path:
 compiled and ``BLDC_ACTUATOR_NO_NUMBA=1``). test_transmission.py re-runs them with today's kernel: a rigid
 transmission (``gear.transmission_stiffness = 0``) must give the same numbers, bit for bit."""
-import math, sys, platform
+import math
+import sys
 import numpy as np
 from bldc_actuator.model import Actuator, BatchActuator, COMPILED
 from bldc_actuator.params import load_preset, ActuatorParams
