@@ -1,7 +1,9 @@
 """Rigid reference trajectories: the scenarios whose outputs the kernel before the transmission (commit d770331)
 wrote to ``test/data/rigid_reference_d770331.npz`` (``python test/rigid_reference.py OUT.npz``, once per path:
-compiled and ``BLDC_ACTUATOR_NO_NUMBA=1``). test_transmission.py re-runs them with today's kernel: a rigid
-transmission (``gear.transmission_stiffness = 0``) must give the same numbers, bit for bit."""
+compiled and ``BLDC_ACTUATOR_NO_NUMBA=1``; the two files merged into one with the keys ``compiled:<run>`` /
+``python:<run>`` and ``meta`` = numba version, numpy version, machine, commit). test_transmission.py re-runs them
+with today's kernel: a rigid transmission (``gear.transmission_stiffness = 0``) must give the same numbers, bit for
+bit."""
 import math
 import sys
 import numpy as np
