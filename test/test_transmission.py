@@ -236,3 +236,16 @@ def test_node_descriptors_include_the_transmission():
                        ("gear.backlash", "[rad]")):
         text = node_params.describe(SPECS[name], runtime=False).description
         assert unit in text and "output side" in text and "range [0," in text
+
+
+def test_mujoco_coupling_refuses_a_compliant_transmission():
+    """The body integrates the joint (rotor inertia as armature): a compliant gear is refused when the coupling is
+    built, naming the joint and the field; a rigid one couples as before."""
+    pytest.importorskip("mujoco")
+    from bldc_actuator.mujoco import CoupledSim
+
+    xml = """<mujoco><option timestep="0.001"/><worldbody><body><joint name="j" type="hinge"/>
+             <geom size="0.1" mass="1"/></body></worldbody></mujoco>"""
+    with pytest.raises(ValueError, match="j: gear.transmission_stiffness 50 N\\*m/rad"):
+        CoupledSim(xml, {"j": _inert()})
+    CoupledSim(xml, {"j": _inert(**{"gear.transmission_stiffness": 0.0, "gear.load_inertia": 0.0})})
