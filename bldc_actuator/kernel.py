@@ -48,6 +48,8 @@ _COEF_SCALARS = (
     "has_alpha", "has_beta", "has_stribeck", "has_friction", "has_position_load", "k_sat",
     "fe_h", "fe_e", "sens_off_a", "sens_off_b", "sens_gain_a", "sens_gain_b", "has_sensor_error", "v_dt", "dt_delta",
     "v_lim_mode", "I_fw", "R_ctl", "L_ctl", "K_ctl",
+    # transmission (gear.*, output side): stiffness, damping, load inertia, half the backlash; has_compliance 0 = rigid
+    "k_tr", "c_tr", "J_l", "bl_half", "has_compliance",
 )
 COEF_DTYPE = np.dtype(
     [(name, np.float64) for name in _COEF_SCALARS]
@@ -66,6 +68,9 @@ STATE_DTYPE = np.dtype([
     ("i_fw", np.float64),
     # prescribed motion (a multibody integrates the mechanics): the rotor speed ramps with the given ``acc``
     ("prescribed", np.bool_), ("imp_em", np.float64), ("e_em", np.float64),
+    # the load behind a compliant transmission (output side; unused when rigid): angle [rad], speed [rad/s];
+    # an external torque at the rotor [N*m, motor side]; the transmission damping's dissipation [J]
+    ("theta_l", np.float64), ("omega_l", np.float64), ("tau_ext_m", np.float64), ("e_tdamp", np.float64),
 ], align=True)
 
 #: ``drive.voltage_limit_mode`` -> the kernel's ``v_lim_mode`` code
@@ -302,6 +307,116 @@ def friction(c, num, den, w0, h):
 
 
 @jit
+def backlash_deflection(delta, half):
+    """The spring's effective deflection [rad, output side] for a deflection ``delta`` with a dead zone of
+    ``half`` each side (half the backlash): 0 inside, ``delta -+ half`` beyond it."""
+    if delta > half:
+        return delta - half
+    if delta < -half:
+        return delta + half
+    return 0.0
+
+
+@jit
+def spring_energy(c, s):
+    """Energy stored in the transmission spring [J]: ``k dz(delta)^2 / 2``, ``delta = theta/N - theta_load``."""
+    if c.has_compliance == 0.0:
+        return 0.0
+    x = backlash_deflection(s.theta / c.N - s.theta_l, c.bl_half)
+    return 0.5 * c.k_tr * x * x
+
+
+@jit
+def transmission(c, s, num, den, w0, h, tau_L):
+    """Motor and load speeds over an interval with a compliant transmission (implicit midpoint, like the rigid
+    mechanics): the rotor's balance ``den w = num - tau_f - tau_s/N`` (``num``, ``den`` as for a rigid rotor
+    without the load) and the load's ``2 J_l (u - omega_l0)/h = tau_s - tau_L``, with the spring torque at the
+    mid-interval deflection ``tau_s = k (delta_m -+ b/2) + c (w/N - u)`` where in contact, 0 in the backlash gap;
+    ``delta_m = delta_0 + (h/2)(w/N - u)``, ``w``, ``u`` the mean speeds. In contact everything is affine in ``w``:
+    the load is eliminated (``u = u0 + u1 w``) and the rotor's equation keeps its form (``num``, ``den``
+    updated), so friction's stick/slip (:func:`friction`) is solved as for a rigid rotor. The contact state is
+    taken at the mid-interval deflection, predicted from the start speeds and corrected (at most twice) when the
+    solution lands elsewhere. Returns ``(w, tau_f, u, tau_s, damping_work, elastic_work_minus_energy_change)``:
+    the last is zero in one contact state (the midpoint rule conserves a linear spring's energy) and the energy
+    error of a step that crosses a backlash edge."""
+    N = c.N
+    half = c.bl_half
+    d0 = s.theta / N - s.theta_l
+    wl0 = s.omega_l
+    J2h_l = 2.0 * c.J_l / h
+    dm = d0 + 0.5 * h * (w0 / N - wl0)           # predicted mid-interval deflection
+    side = 1.0 if dm > half else (-1.0 if dm < -half else 0.0)
+    w, tau_f, u, ke, ce, off = w0, 0.0, wl0, 0.0, 0.0, 0.0
+    for _ in range(3):
+        ke = c.k_tr if side != 0.0 else 0.0
+        ce = c.c_tr if side != 0.0 else 0.0
+        off = side * half
+        g = 0.5 * h * ke + ce                    # tau_s = ke (d0 - off) + g (w/N - u)
+        a_l = J2h_l + g
+        u0 = (J2h_l * wl0 + ke * (d0 - off) - tau_L) / a_l
+        u1 = g / (N * a_l)
+        s0 = ke * (d0 - off) - g * u0            # tau_s = s0 + s1 w
+        s1 = g * (1.0 / N - u1)
+        num_c = num - s0 / N
+        den_c = den + s1 / N
+        if c.has_friction != 0.0:
+            w, tau_f = friction(c, num_c, den_c, w0, h)
+        else:
+            w = num_c / den_c
+            tau_f = 0.0
+        u = u0 + u1 * w
+        dm = d0 + 0.5 * h * (w / N - u)
+        now = 1.0 if dm > half else (-1.0 if dm < -half else 0.0)
+        if now == side:
+            break
+        side = now
+    rate = w / N - u
+    tau_s = ke * (dm - off) + ce * rate
+    d1 = d0 + h * rate
+    x0 = backlash_deflection(d0, half)
+    x1 = backlash_deflection(d1, half)
+    elastic = ke * (dm - off) * h * rate - 0.5 * c.k_tr * (x1 * x1 - x0 * x0)
+    return w, tau_f, u, tau_s, ce * rate * rate * h, elastic
+
+
+@jit
+def load_follow(th_in, w_in, t, k_over_J, c_over_J, half, th_l0, w_l0, th_l, w_l):
+    """The load behind a compliant transmission when the rotor's motion is GIVEN (a recording's): ``th_in``,
+    ``w_in`` = rotor angle and speed divided by the gear ratio [rad, rad/s, output side] at the times ``t`` [s];
+    the load's ``J_l theta_l'' = k dz(delta) + c d(delta)/dt`` (0 inside the backlash, ``half`` each side),
+    ``delta = th_in - theta_l``, with the stiffness and damping per load inertia ``k_over_J`` [1/s^2],
+    ``c_over_J`` [1/s]. The same implicit midpoint as :func:`transmission` (the rotor angle at the interval's
+    midpoint, its mean speed the angle's change over the interval; the contact state at the mid-interval
+    deflection, corrected at most twice). Starts at ``th_l0``, ``w_l0``; writes ``th_l``, ``w_l`` in place."""
+    th_l[0] = th_l0
+    w_l[0] = w_l0
+    for i in range(len(t) - 1):
+        h = t[i + 1] - t[i]
+        x0, u0 = th_l[i], w_l[i]
+        if not h > 0.0:
+            th_l[i + 1] = x0
+            w_l[i + 1] = u0
+            continue
+        r_m = (th_in[i + 1] - th_in[i]) / h
+        m_mid = 0.5 * (th_in[i] + th_in[i + 1])
+        dm = m_mid - x0 - 0.5 * h * u0
+        side = 1.0 if dm > half else (-1.0 if dm < -half else 0.0)
+        u = u0
+        for _ in range(3):
+            ke = k_over_J if side != 0.0 else 0.0
+            ce = c_over_J if side != 0.0 else 0.0
+            # 2 (u - u0)/h = ke (m_mid - x0 - h u/2 - off) + ce (r_m - u)
+            u = (2.0 * u0 / h + ke * (m_mid - x0 - side * half) + ce * r_m) / (2.0 / h + 0.5 * h * ke + ce)
+            dm = m_mid - x0 - 0.5 * h * u
+            now = 1.0 if dm > half else (-1.0 if dm < -half else 0.0)
+            if now == side:
+                break
+            side = now
+        th_l[i + 1] = x0 + h * u
+        w_l[i + 1] = 2.0 * u - u0
+
+
+@jit
 def advance(c, s, h_ns):
     """Advance the plant by ``h_ns`` [ns] with the held voltage ``s.v``."""
     h = h_ns * 1e-9
@@ -331,12 +446,24 @@ def advance(c, s, h_ns):
     A = (c0_v * (1.0 - phi1) + i0 * phi1 - m_w * w0).imag   # mean i_q = A + B w
     B = m_w.imag
     # external torques at the motor side, at the predicted mid-interval angle
-    if c.has_position_load != 0.0:
+    compliant = c.has_compliance != 0.0 and not s.prescribed
+    tau_L = 0.0                                  # the load's torque at the output (compliant: on the second mass)
+    if compliant:
+        thl_mid = s.theta_l + 0.5 * h * s.omega_l
+        if c.has_position_load != 0.0:
+            tau_L = _position_load_torque_out(thl_mid, c.load0 + s.tau_ext_out, c.load_g, c.load_phi, c.load_k,
+                                              c.load_k0)
+        else:
+            tau_L = c.load0 + s.tau_ext_out
+        tau_other = -s.tau_ext_m
+    elif c.has_position_load != 0.0:
         th_mid = th0 + 0.5 * h * w0
         tau_other = _position_load_torque_out(th_mid / c.N, c.load0 + s.tau_ext_out, c.load_g,
                                               c.load_phi, c.load_k, c.load_k0) / c.N
     else:
         tau_other = (c.load0 + s.tau_ext_out) / c.N
+    if s.tau_ext_m != 0.0 and not compliant:
+        tau_other = tau_other - s.tau_ext_m
     if c.n_cog > 0:
         tau_other = tau_other + _cogging_torque_mean(th0, h * w0, c.cog_order, c.cog_cos[:c.n_cog],
                                                      c.cog_sin[:c.n_cog])
@@ -344,8 +471,14 @@ def advance(c, s, h_ns):
     b = c.b + c.fe_e                             # viscous damping + eddy-current iron-loss drag
     den = 2.0 * J / h + b - K * B
     num = 2.0 * J * w0 / h + K * A - tau_other
+    u = 0.0                                      # the load's mean speed over the interval (compliant)
+    tau_s = 0.0                                  # the transmission's torque at the output, interval mean
+    tdamp = 0.0                                  # its damping's dissipation over the interval [J]
+    de_spring = 0.0                              # the elastic work on the spring minus its energy change [J]
     if s.prescribed:                             # the speed is given: w0 + acc t (a body's, see CoupledSim)
         w, tau_f = w0 + 0.5 * h * s.acc, 0.0
+    elif compliant:
+        w, tau_f, u, tau_s, tdamp, de_spring = transmission(c, s, num, den, w0, h, tau_L)
     elif c.has_friction != 0.0:
         w, tau_f = friction(c, num, den, w0, h)
     else:
@@ -388,6 +521,12 @@ def advance(c, s, h_ns):
     s.e_iron = s.e_iron + P_fe * h
     s.e_fric = s.e_fric + tau_f * dth
     s.e_load = s.e_load + tau_other * dth
+    if compliant:
+        s.e_load = s.e_load + tau_L * u * h      # the load torque's work on the second mass
+        s.e_tdamp = s.e_tdamp + tdamp
+        s.e_disc = s.e_disc + de_spring
+        s.theta_l = s.theta_l + u * h
+        s.omega_l = 2.0 * u - s.omega_l
     s.e_amb = s.e_amb + int_y2 / c.R_ha
     s.e_disc = s.e_disc + (conv_el - conv_mech)
     s.imp_em = s.imp_em + K * i_mean.imag * h   # ∫ τ_em dt: the interval-mean torque a coupled body receives

@@ -191,6 +191,15 @@ class _Coeffs:
         self.load_k0 = ld("spring_zero")
         self.has_position_load = bool(np.any(self.load_g) or np.any(self.load_k))
         self.k_sat = e("kt_saturation")
+        g = lambda name: col(lambda p: getattr(p.gear, name))  # noqa: E731
+        # transmission (output side); gear.transmission_stiffness = 0 means rigid (the kernel's rigid path)
+        self.k_tr = g("transmission_stiffness")
+        self.c_tr = g("transmission_damping")
+        self.J_l = g("load_inertia")
+        self.bl_half = 0.5 * g("backlash")
+        self.has_compliance = col(lambda p: p.gear.transmission_stiffness > 0.0)
+        self.compliant = bool(np.any(self.has_compliance))
+        self.enc_load = col(lambda p: p.gear.encoder_side == "load")
         self.n_cog = len(self.cog_cos)
         if self.n_cog > kernel.MAX_COGGING_HARMONICS:
             raise ValueError(f"effects.cogging_cos: at most {kernel.MAX_COGGING_HARMONICS} harmonics, "
@@ -250,6 +259,10 @@ class ActuatorState:
     i_q_ref: float = 0.0        #: q-axis current reference after limits [A]
     tripped: bool = False       #: over-temperature trip (latched)
     i_d_ref: float = 0.0        #: d-axis current reference of the field-weakening regulator [A] (<= 0)
+    #: the load behind a compliant transmission (gear.transmission_stiffness > 0), OUTPUT side: angle [rad] and
+    #: speed [rad/s]; None = the rigid position theta / N, omega / N (what a rigid transmission always has)
+    theta_load_out: float | None = None
+    omega_load_out: float | None = None
 
     @property
     def t(self) -> float:
@@ -263,7 +276,7 @@ class EnergyLedger:
     electrical_in: float = 0.0      #: ∫ (v_d i_d + v_q i_q) dt: power from the inverter
     joule: float = 0.0              #: ∫ R |i|² dt
     magnetic: float = 0.0           #: ½ L |i|² now
-    kinetic: float = 0.0            #: ½ J ω² now
+    kinetic: float = 0.0            #: ½ J ω² now (+ ½ J_load ω_load² of the load behind a compliant transmission)
     viscous: float = 0.0            #: ∫ b ω² dt
     friction: float = 0.0           #: ∫ τ_f ω dt
     load: float = 0.0               #: work done on the external load and cogging ∫ (τ_load/N + τ_cog) ω dt
@@ -273,12 +286,16 @@ class EnergyLedger:
     thermal: float = 0.0            #: C_w (T_w - T_w0) + C_h (T_h - T_h0)
     #: ∫ K ω(t) i_q dt (electrical side) minus the work of the interval-mean torque (mechanical side):
     #: the integrator's own energy error, O(h³) per interval. Reported, never subtracted in residual().
+    #: With backlash it also holds the spring's energy error of the steps that cross a backlash edge.
     discretization: float = 0.0
+    spring: float = 0.0             #: ½ k dz(δ)² now: the compliant transmission's stored energy
+    transmission_damping: float = 0.0   #: ∫ c (dδ/dt)² dt: dissipated in the transmission's damping
 
     def residual(self, initial: "EnergyLedger") -> float:
         """Electrical energy in minus everything it went to [J] (0 up to round-off)."""
         return (self.electrical_in - self.joule - (self.magnetic - initial.magnetic)
-                - (self.kinetic - initial.kinetic) - self.viscous - self.friction - self.load)
+                - (self.kinetic - initial.kinetic) - (self.spring - initial.spring) - self.viscous - self.friction
+                - self.load - self.transmission_damping)
 
     def thermal_residual(self) -> float:
         """Joule heat + iron-loss heat minus (heat stored + heat to ambient) [J]."""
@@ -334,6 +351,7 @@ class _Base:
             self._rc, self._rs = kernel.to_records(self._cs), kernel.to_records(self._ss)
         else:
             self._step_all = kernel.compiled_entry(kernel.step_all, self._cs, self._ss)
+        self._seat_load()
 
     def _new_coeffs(self, plist) -> None:
         self._c = _Coeffs(plist if self._batch else plist[0])
@@ -385,12 +403,42 @@ class _Base:
         ``omega + acc·t`` [rad/s, rad/s², motor side, from now] and the angle ``theta`` [rad] (kept if None);
         the rotor inertia, damping, friction and load of the parameters are then the body's to apply (the
         kernel's ledger keeps only the electrical and thermal terms meaningful: :attr:`impulse_em`,
-        :attr:`magnetic_work`). Call it before every body step; :meth:`release_motion` ends the mode."""
+        :attr:`magnetic_work`). Call it before every body step; :meth:`release_motion` ends the mode.
+
+        Rigid transmissions only: the body's joint is the rotor through an ideal gear (a compliant one,
+        ``gear.transmission_stiffness`` > 0, is refused with a ValueError; model it in the body instead)."""
+        if self._c.compliant:
+            raise ValueError("gear.transmission_stiffness: prescribed motion (a multibody integrating the mechanics) "
+                             "needs a rigid transmission (0 N*m/rad); model the compliance in the body (a joint "
+                             "spring) instead")
         self._set("omega", omega)
         self._set("acc", acc)
         if theta is not None:
             self._set("theta", theta)
         self._set("prescribed", True)
+
+    def _seat_load(self, only_new: np.ndarray | bool = True) -> None:
+        """Put the load behind a compliant transmission where a rigid one would hold it: angle ``theta / N`` less
+        the static deflection under the constant load, speed ``omega / N`` (where ``only_new`` is True)."""
+        c = self._c
+        if not c.compliant:
+            return
+        k = np.where(c.has_compliance, c.k_tr, 1.0)
+        static = (c.load0 + self._get("tau_ext_out")) / k * c.has_compliance
+        th_l = self._get("theta") / c.N - static
+        w_l = self._get("omega") / c.N
+        keep = np.logical_not(only_new)
+        self._set("theta_l", np.where(keep, self._get("theta_l"), th_l))
+        self._set("omega_l", np.where(keep, self._get("omega_l"), w_l))
+
+    def set_rotor_torque(self, tau_motor) -> None:
+        """External torque acting on the rotor [N*m, MOTOR side] (positive drives the rotor forward), besides the
+        motor's own: e.g. a torque the motor's current produces, applied from outside (the diagnosis' replay driven
+        by the measured current). With a rigid transmission it is ``-N`` times an output load."""
+        tau = np.asarray(tau_motor, dtype=float)
+        if not np.all(np.isfinite(tau)):
+            raise ValueError(f"rotor torque: expected a finite motor-side torque [N*m], got {tau_motor!r}")
+        self._set("tau_ext_m", tau if self._batch else float(tau))
 
     def release_motion(self) -> None:
         """End :meth:`prescribe_motion`: the actuator's own mechanical equation moves the rotor again."""
@@ -410,8 +458,19 @@ class _Base:
 
     def _ledger_values(self):
         c, g = self._c, self._get
+        kinetic = 0.5 * c.J * g("omega") ** 2
+        spring = 0.0 * kinetic
+        if c.compliant:
+            w_l = g("omega_l")
+            kinetic = kinetic + 0.5 * c.J_l * w_l * w_l * c.has_compliance
+            defl = g("theta") / c.N - g("theta_l")
+            x = np.sign(defl) * np.maximum(np.abs(defl) - c.bl_half, 0.0)     # the dead zone of the backlash
+            spring = 0.5 * c.k_tr * x * x * c.has_compliance
+            if not self._batch:
+                kinetic, spring = float(kinetic), float(spring)
         return dict(electrical_in=g("e_in"), joule=g("e_joule"), magnetic=0.5 * c.L * abs(g("i")) ** 2,
-                    kinetic=0.5 * c.J * g("omega") ** 2, viscous=g("e_visc"), friction=g("e_fric"),
+                    kinetic=kinetic, spring=spring, transmission_damping=g("e_tdamp"),
+                    viscous=g("e_visc"), friction=g("e_fric"),
                     load=g("e_load"), heat_to_ambient=g("e_amb"), discretization=g("e_disc"), iron_heat=g("e_iron"),
                     thermal=c.C_w * (g("T_w") - self._T0[0]) + c.C_h * (g("T_h") - self._T0[1]))
 
@@ -486,9 +545,13 @@ class Actuator(_Base):
         self._set("tau_ext_out", float(tau_out))
 
     def update_params(self, params: ActuatorParams) -> None:
-        """Replace the parameters; the state carries on (bus voltage, limits, load, ambient...)."""
+        """Replace the parameters; the state carries on (bus voltage, limits, load, ambient...). A transmission
+        that turns compliant starts with its load where the rigid one held it (:meth:`_seat_load`)."""
+        was = bool(self._c.compliant)
         self.params = params
         self._new_coeffs([params])
+        if not was:
+            self._seat_load()
 
     def reset_fault(self) -> None:
         """Clear a latched over-temperature trip (it trips again at once if still too hot)."""
@@ -502,7 +565,9 @@ class Actuator(_Base):
         return ActuatorState(t_ns=int(g("t_ns")), i_d=i.real, i_q=i.imag, omega=float(g("omega")),
                              theta=float(g("theta")), T_winding=float(g("T_w")), T_housing=float(g("T_h")),
                              v_d=v.real, v_q=v.imag, z_d=z.real, z_q=z.imag, i_q_ref=float(g("i_ref")),
-                             tripped=bool(g("tripped")), i_d_ref=float(g("i_fw")))
+                             tripped=bool(g("tripped")), i_d_ref=float(g("i_fw")),
+                             theta_load_out=float(g("theta_l")) if self._c.compliant else None,
+                             omega_load_out=float(g("omega_l")) if self._c.compliant else None)
 
     def set_state(self, st: ActuatorState) -> None:
         s = self._set
@@ -518,6 +583,11 @@ class Actuator(_Base):
         s("i_ref", float(st.i_q_ref))
         s("tripped", bool(st.tripped))
         s("i_fw", float(st.i_d_ref))
+        self._seat_load()
+        if st.theta_load_out is not None:
+            s("theta_l", float(st.theta_load_out))
+        if st.omega_load_out is not None:
+            s("omega_l", float(st.omega_load_out))
 
     def outputs(self) -> dict[str, float]:
         """Everything a driver or the node publishes, derived from the state."""
@@ -534,6 +604,9 @@ class Actuator(_Base):
         else:
             r = self._rs[0]
             i_q, omega, theta, T_h, v = r.i.imag, r.omega, r.theta, r.T_h, r.v
+        if c.enc_load and c.compliant:     # an encoder behind a compliant transmission reads the load
+            return (self._get("theta_l"), self._get("omega_l"), _torque_constant_q(c, i_q, T_h) * i_q * c.N,
+                    _voltage_saturated(c, abs(v)))
         return (theta / c.N, omega / c.N, _torque_constant_q(c, i_q, T_h) * i_q * c.N,
                 _voltage_saturated(c, abs(v)))
 
@@ -574,13 +647,29 @@ def _outputs(c: _Coeffs, s, winding, ops) -> dict[str, Any]:
                                                            c.sens_gain_a, c.sens_gain_b)
                   if c.batch else kernel.measured_current_dq(i_d, i_q, theta_e, c.sens_off_a, c.sens_off_b,
                                                              c.sens_gain_a, c.sens_gain_b))
+    # the transmission: the load's angle and speed (the rigid ones when rigid), which encoder position_out reports
+    th_m_out, w_m_out = s.theta / c.N, s.omega / c.N
+    th_l_out, w_l_out, tau_s_out, defl = th_m_out, w_m_out, K * i_q * c.N * 0.0, 0.0 * th_m_out
+    if c.compliant:
+        rigid = np.logical_not(c.has_compliance)
+        th_l_out = ops.where(rigid, th_m_out, s.theta_l)
+        w_l_out = ops.where(rigid, w_m_out, s.omega_l)
+        defl = th_m_out - th_l_out
+        x = np.sign(defl) * np.maximum(np.abs(defl) - c.bl_half, 0.0) * (np.abs(defl) > c.bl_half)
+        tau_s_out = c.k_tr * x + c.c_tr * (w_m_out - w_l_out) * (np.abs(defl) > c.bl_half)
+        if not c.batch:
+            th_l_out, w_l_out, defl, tau_s_out = float(th_l_out), float(w_l_out), float(defl), float(tau_s_out)
+    enc_load = np.logical_and(c.enc_load, c.has_compliance) if c.batch else bool(c.enc_load and c.compliant)
     return {
         "t": s.t_ns * 1e-9,
         "i_d": i_d, "i_q": i_q, "i_q_ref": s.i_ref, "v_d": v_d, "v_q": v_q,
         "v_limit_q": c.V_max, "v_magnitude_q": v_mag, "bus_voltage": c.V_bus,
         "voltage_saturated": _voltage_saturated(c, v_mag),
         "omega": s.omega, "theta": s.theta,
-        "position_out": s.theta / c.N, "velocity_out": s.omega / c.N,
+        "position_out": ops.where(enc_load, th_l_out, th_m_out), "velocity_out": ops.where(enc_load, w_l_out, w_m_out),
+        "position_motor_out": th_m_out, "velocity_motor_out": w_m_out,   # the rotor's angle / N
+        "position_load_out": th_l_out, "velocity_load_out": w_l_out,     # the load's (= the rotor's / N when rigid)
+        "transmission_deflection_out": defl, "transmission_torque_out": tau_s_out,
         "torque_em": K * i_q, "effort_out": K * i_q * c.N,
         "i_phase_a": i_a, "i_phase_b": i_b, "i_phase_c": i_c,
         "i_line_a": i_A, "i_line_b": i_B, "i_line_c": i_C,
@@ -615,9 +704,11 @@ class BatchActuator(_Base):
         return len(self.params)
 
     def set_state(self, *, i_d, i_q, omega, theta, T_winding, T_housing, v_d=0.0, v_q=0.0, z_d=0.0, z_q=0.0,
-                  i_q_ref=0.0) -> None:
+                  i_q_ref=0.0, theta_load_out=None, omega_load_out=None) -> None:
         """Set the state of every element (arrays of length ``len(self)`` or scalars), e.g. to start
-        simulation windows from measured states (multiple shooting). The command is set to ``i_q_ref``."""
+        simulation windows from measured states (multiple shooting). The command is set to ``i_q_ref``. The load
+        behind a compliant transmission (output side) at ``theta_load_out``/``omega_load_out``; None: where a rigid
+        transmission would hold it (``theta/N`` less the static deflection under the constant load, ``omega/N``)."""
         n = len(self)
         arr = lambda x: np.broadcast_to(np.asarray(x, dtype=float), (n,)).copy()  # noqa: E731
         s = self._set
@@ -633,15 +724,22 @@ class BatchActuator(_Base):
         s("cmd_q", arr(i_q_ref))
         s("acc", np.zeros(n))
         s("v_mode", False)
+        self._seat_load()
+        if theta_load_out is not None:
+            s("theta_l", arr(theta_load_out))
+        if omega_load_out is not None:
+            s("omega_l", arr(omega_load_out))
 
     def update_params(self, params: Sequence[ActuatorParams]) -> None:
         """Replace every element's parameters (same count); the states carry on (see :meth:`Actuator.update_params`)."""
         params = list(params)
         if len(params) != len(self):
             raise ValueError(f"params: expected {len(self)} parameter sets, got {len(params)}")
+        was = np.asarray(self._c.has_compliance, dtype=bool)
         self.params = params
         self._new_coeffs(params)
         self._winding = np.array([p.motor.winding for p in params])
+        self._seat_load(only_new=np.logical_not(was))
 
     def reset_fault(self, index: int | None = None) -> np.ndarray:
         """Clear the latched over-temperature trip of element ``index`` (all if None); returns the trip flags

@@ -141,7 +141,35 @@ class DriveParams:
 
 @dataclass(frozen=True)
 class GearParams:
+    """Gear and transmission. Rigid by default (``transmission_stiffness = 0`` means rigid: the rotor and the
+    output move as one, ``motor.rotor_inertia`` holds the load reflected to the motor side).
+
+    With ``transmission_stiffness`` k > 0 the output is a second mass (``load_inertia`` J_l) behind a torsional
+    spring and damper (a shaft, belt, harmonic drive or series-elastic spring), all at the OUTPUT side, with an
+    optional dead zone (``backlash``) in the spring's deflection ``delta = theta/N - theta_load``::
+
+        tau_spring_out = k dz(delta) + c d(delta)/dt   (0 inside the dead zone, |delta| <= backlash/2)
+        J   d(omega)/dt      = K i_q - ... - tau_spring_out / N       (motor side; motor.rotor_inertia: rotor only)
+        J_l d(omega_load)/dt = tau_spring_out - tau_load(theta_load)   (output side; the load.* torques act here)
+
+    Two-mass resonance (rigid-free): ``omega_r = sqrt(k (1/(J N^2) + 1/J_l))``, anti-resonance
+    ``omega_a = sqrt(k/J_l)``.
+    """
+
     gear_ratio: float = _p(1.0, "", "N: motor angle / output angle (ideal, lossless gear)", 1.0, 1000.0)
+    transmission_stiffness: float = _p(0.0, "N*m/rad", "k: torsional stiffness between the gear and the load, "
+                                       "output side; 0 = rigid (no second mass)", 0.0, 1e7)
+    transmission_damping: float = _p(0.0, "N*m*s/rad", "c: damping of the transmission spring, output side "
+                                     "(acts on the deflection rate; none inside the backlash)", 0.0, 1e5)
+    load_inertia: float = _p(0.0, "kg*m^2", "J_load: inertia behind the transmission, output side (with "
+                             "transmission_stiffness > 0; motor.rotor_inertia is then the rotor side alone)",
+                             0.0, 1e4)
+    backlash: float = _p(0.0, "rad", "total width of the dead zone in the transmission's deflection, output side "
+                         "(with transmission_stiffness > 0)", 0.0, 0.5)
+    encoder_side: str = _p("motor", "", "which angle position/velocity (joint_states, outputs position_out, a "
+                           "recording's position channel) report: motor (the rotor encoder, divided by "
+                           "gear_ratio) or load (an encoder behind the transmission); the same when rigid",
+                           choices=("motor", "load"))
 
 
 @dataclass(frozen=True)
@@ -354,7 +382,16 @@ def validate(params: ActuatorParams) -> None:
     """Range checks of every field plus cross-field consistency."""
     for name, value in to_flat(params).items():
         check_value(SPECS[name], value)
-    e, d = params.effects, params.drive
+    e, d, g = params.effects, params.drive, params.gear
+    if g.transmission_stiffness > 0.0 and not g.load_inertia > 0.0:
+        raise ParameterError("gear.load_inertia", f"must be > 0 kg*m^2 with gear.transmission_stiffness "
+                             f"{g.transmission_stiffness:g} N*m/rad (the mass behind the spring), got {g.load_inertia:g}")
+    if g.transmission_stiffness == 0.0:
+        for name, unit in (("load_inertia", "kg*m^2"), ("transmission_damping", "N*m*s/rad"), ("backlash", "rad")):
+            if getattr(g, name) != 0.0:
+                raise ParameterError(f"gear.{name}", f"{getattr(g, name):g} {unit} needs gear.transmission_stiffness "
+                                     f"> 0 N*m/rad (0 = rigid: a rigid load's inertia belongs in motor.rotor_inertia); "
+                                     f"expected 0 with a rigid transmission")
     if len(e.cogging_cos) != len(e.cogging_sin):
         raise ParameterError("effects.cogging_sin", f"needs as many entries as effects.cogging_cos "
                              f"({len(e.cogging_cos)}), got {len(e.cogging_sin)}")

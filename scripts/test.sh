@@ -33,7 +33,8 @@ rc=0
 if [[ $both == 1 && "${BLDC_TEST_PYTHON_KERNEL:-1}" != 0 ]]; then
     echo "test.sh: physics tests on the pure-Python kernel path (BLDC_ACTUATOR_NO_NUMBA=1)"
     BLDC_ACTUATOR_NO_NUMBA=1 "$VENV/bin/python" -m pytest -q -p no:cacheprovider \
-        test/test_model.py test/test_simulate.py test/test_presets.py test/test_voltage_limit.py test/test_mujoco.py test/test_dead_time.py
+        test/test_model.py test/test_simulate.py test/test_presets.py test/test_voltage_limit.py test/test_mujoco.py test/test_dead_time.py \
+        test/test_transmission.py
     rc=$?
     echo "test.sh: full suite (compiled kernel)"
 fi

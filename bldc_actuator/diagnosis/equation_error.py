@@ -539,6 +539,10 @@ def _derive(ctx: Context) -> None:
         S["theta"] = th
         ctx.valid["theta"] = ctx.valid["omega"]
     S["theta_known"] = np.array(1.0 if "position" in have else 0.0)
+    if "load_position" in have and not ctx.steady:   # a second encoder behind the transmission (output side)
+        S["theta_load"] = raw["load_position"]
+        ctx.valid["theta_load"] = ctx.valid["load_position"]
+        S["omega_load"] = _gradient(S["theta_load"], t, segs)
     if "omega" in S:
         w = S["omega"]
         S["omega_dot"] = zero.copy() if ctx.steady else _gradient(w, t, segs)

@@ -19,6 +19,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -31,6 +32,7 @@ from ..params import SPECS, ActuatorParams, controller_motor, from_flat, keep_co
 from .candidates import Candidate
 from .equation_error import Context, Fit, thermal_response
 from .selection import SelectionResult, fit_model
+from .transmission import window_load_states
 from .significance import THERMAL_FIT_BOUND_LOG
 
 
@@ -145,7 +147,10 @@ def effect_parameters(ctx: Context, sel: SelectionResult, ff: FinalFit, lib: dic
         coef = ff.beta[ii]
         cov = ff.cov[np.ix_(ii, ii)]
         cand = lib[a.effect]
-        pars = cand.to_params(coef, cov, a.added, a.variant, ctx)
+        # the refined continuous hyper-parameters (final_fit) are what the parameters derive from
+        refined = {n: v for n, v in ff.nonlinear.get(a.effect, {}).items() if n in a.variant.hyper}
+        variant = dataclasses.replace(a.variant, hyper={**a.variant.hyper, **refined}) if refined else a.variant
+        pars = cand.to_params(coef, cov, a.added, variant, ctx)
         for name, info in ff.nonlinear.get(a.effect, {}).items():
             if name.endswith("_sd") or name.endswith("_corr_amplitude"):
                 continue
@@ -307,6 +312,12 @@ def updated_params(ctx: Context, sel: SelectionResult, pars: dict[str, dict], li
             if spec.type in (int, float):
                 v = _within_limits(spec, v, notes, fld)
             flat[fld] = v
+    if "transmission_compliance" in accepted and flat.get("gear.transmission_stiffness", 0.0) > 0.0:
+        # the rigid model's rotor inertia held the load: the rotor side keeps the rest (after any inertia finding)
+        j_ref = pars["transmission_compliance"]["load_inertia_reflected"]["value"]
+        flat["motor.rotor_inertia"] = flat["motor.rotor_inertia"] - j_ref
+        notes.append(f"transmission_compliance: motor.rotor_inertia -= {j_ref:.4g} kg*m^2 (the load, now "
+                     f"gear.load_inertia behind the spring)")
     try:
         newp = from_flat(flat)
     except Exception as exc:  # noqa: BLE001 - a fitted value the schema refuses: keep the nominal, say why
@@ -511,10 +522,15 @@ def _simulate_current_driven(ctx: Context, param_sets: list[ActuatorParams], sta
     sims = {k: np.zeros((L, cols_all)) for k in ("sim_i", "sim_w", "sim_th", "sim_v", "sim_id")}
     i_lp = ctx.dec.lowpass(S["i_q"])
     for js in groups.values():
-        b = BatchActuator([plist[j] for j in js for _ in range(nW)])
+        group = [plist[j] for j in js for _ in range(nW)]
+        b = BatchActuator(group)
         st = np.tile(st_one, len(js))
+        th_l, w_l = window_load_states(ctx, group, st)   # the load behind a compliant transmission
         b.set_state(i_d=0.0, i_q=0.0, omega=w_meas[st], theta=S["theta"][st], T_winding=S["T_w"][st],
-                    T_housing=S["T_h"][st])
+                    T_housing=S["T_h"][st], theta_load_out=th_l, omega_load_out=w_l)
+        # a compliant transmission: the motor's torque acts on the rotor, the load's behind the spring
+        on_rotor = np.array([p.gear.transmission_stiffness > 0.0 for p in group])
+        N_col = np.array([p.gear.gear_ratio for p in group])
         tau = np.vstack([drive_torque[j] for j in js])            # (sets in group, samples)
         rows = np.repeat(np.arange(len(js)), nW)
         cols = np.concatenate([np.arange(j * nW, (j + 1) * nW) for j in js])
@@ -524,7 +540,12 @@ def _simulate_current_driven(ctx: Context, param_sets: list[ActuatorParams], sta
                 # the torque over the sub-step: the measured current at its midpoint (aligned with the motion
                 # in search: a current at sample k acts around t_k)
                 f = (jj + 0.5) / n_sub
-                b.set_load_torque(-(tau[rows, a] + f * (tau[rows, z] - tau[rows, a])))
+                tau_now = tau[rows, a] + f * (tau[rows, z] - tau[rows, a])
+                if on_rotor.any():
+                    ext_now = (ext[a] + f * (ext[z] - ext[a])) if ext is not None else 0.0
+                    b.set_rotor_torque(np.where(on_rotor, (tau_now + ext_now) / N_col, 0.0))
+                    tau_now = np.where(on_rotor, -ext_now, tau_now)   # -> load torque ext at the output
+                b.set_load_torque(-tau_now)
                 b.step(dt / n_sub)
             sims["sim_w"][k, cols] = b.field("omega")
             sims["sim_th"][k, cols] = b.field("theta")
@@ -642,8 +663,10 @@ def _simulate_batch(ctx: Context, plist: list[ActuatorParams], st: np.ndarray, L
     i_d_meas0 = ctx.dec.lowpass(S["i_d"])[st]
     ws = window_start(plist, i_d_meas0, i_meas[st], w_meas[st], S["theta"][st], T_w0, T_h0)
     K = ws.K
+    th_l, w_l = window_load_states(ctx, plist, st)      # the load behind a compliant transmission
     b.set_state(i_d=ws.i_d, i_q=ws.i_q, omega=w_meas[st], theta=S["theta"][st], T_winding=T_w0, T_housing=T_h0,
-                v_d=ws.v.real, v_q=ws.v.imag, z_d=ws.z.real, z_q=ws.z.imag, i_q_ref=cmd[st])
+                v_d=ws.v.real, v_q=ws.v.imag, z_d=ws.z.real, z_q=ws.z.imag, i_q_ref=cmd[st],
+                theta_load_out=th_l, omega_load_out=w_l)
     dt = 1.0 / ctx.fs
     sensed = any(p.drive.current_sensor_offset_a or p.drive.current_sensor_offset_b
                  or p.drive.current_sensor_gain_a != 1.0 or p.drive.current_sensor_gain_b != 1.0 for p in plist)

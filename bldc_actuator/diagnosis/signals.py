@@ -26,6 +26,8 @@ CANONICAL: dict[str, tuple[str, str]] = {
     "current": ("A", "measured q-axis current"),
     "current_d": ("A", "measured d-axis current"),
     "position": ("rad", "rotor (motor-side) angle, unwrapped"),
+    "load_position": ("rad", "load (joint-side) angle behind the transmission, at the OUTPUT, unwrapped: a second "
+                             "encoder after a compliant gear, belt or series-elastic spring"),
     "velocity": ("rad/s", "rotor speed"),
     "bus_voltage": ("V", "DC bus voltage"),
     "voltage_q": ("V", "applied q-axis voltage (power-invariant)"),

@@ -207,6 +207,11 @@ class CoupledSim:
         """The parameters' mechanics into the body (reflected rotor inertia, drag, symmetric dry friction) and
         the per-joint constants of the coupling."""
         m, ps = self.model, self._params
+        for name, p in zip(self._joints, ps):
+            if p.gear.transmission_stiffness > 0.0:   # the body integrates the joint: its gear must be rigid
+                raise ValueError(f"{name}: gear.transmission_stiffness {p.gear.transmission_stiffness:g} N*m/rad: the "
+                                 f"MuJoCo coupling needs a rigid transmission (0); model the compliance in the MJCF "
+                                 f"(a joint spring between two bodies) instead")
         self._N = np.array([p.gear.gear_ratio for p in ps])
         self._Kt_N = np.array([p.motor.torque_constant_q * p.gear.gear_ratio for p in ps])   # torque -> current
         for p, dof, N in zip(ps, self._dof, self._N):
