@@ -263,7 +263,7 @@ def recorder():
     return rec
 
 
-def _write_node_like(recording, path, n=1500, gear=9.0, names=None):
+def _write_node_like(recording, path, n=1500, gear=9.0, names=None, **params):
     """A recording with the node's topic layout (written with McapRecorder, values known)."""
     from sensor_msgs.msg import JointState, Temperature
     from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension
@@ -271,7 +271,7 @@ def _write_node_like(recording, path, n=1500, gear=9.0, names=None):
     q_fields = ("i_q", "i_d", "i_q_ref", "v_q", "v_d", "v_limit_q", "bus_voltage", "v_magnitude_q", "omega",
                 "torque_em", "current_limit_effective", "joule_power", "resistance_phase", "voltage_saturated",
                 "tripped")
-    p = ActuatorParams().replace(**{"gear.gear_ratio": gear})
+    p = ActuatorParams().replace(**{"gear.gear_ratio": gear, **params})
     with recording.McapRecorder(path, parameters=p.to_flat(), metadata={"node": "/bldc_actuator"}) as rec:
         q = Float64MultiArray()
         q.layout.dim = [MultiArrayDimension(label=",".join(q_fields), size=len(q_fields), stride=len(q_fields))]
@@ -315,6 +315,20 @@ def test_own_mcap_recording_round_trip(recorder, tmp_path):
     assert set(s.meta["extraction"].values()) == {"cdr-vectorised, time=header.stamp", "cdr-vectorised"}
     c = clean(s, params=s.meta["params_from_recording"])
     assert not _issues(c, "unit_suspect") and not _issues(c, "outlier")   # position/velocity consistent
+
+
+def test_own_mcap_load_side_encoder_is_load_position(recorder, tmp_path):
+    """gear.encoder_side: load -> the node's joint_states position is the load's angle (output side, no gear
+    factor), read as load_position; the rotor's angle is absent (never the load's angle x gear)."""
+    f = tmp_path / "run.mcap"
+    _write_node_like(recorder, f, **{"gear.transmission_stiffness": 120.0, "gear.load_inertia": 0.01,
+                                     "gear.encoder_side": "load"})
+    s = load(f)
+    x = np.arange(1500) * 1e-3
+    assert np.allclose(s.channels["load_position"], np.cos(x))       # output side, as recorded
+    assert "position" not in s.channels
+    assert np.allclose(s.channels["velocity"], -9.0 * np.sin(x))     # the rotor's, from q_axis_state
+    assert any("encoder_side: load" in n for n in s.meta["notes"])   # said, not silent
 
 
 def test_foreign_mcap_with_mapping_and_variable_layout(recorder, tmp_path):

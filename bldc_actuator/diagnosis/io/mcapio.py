@@ -539,6 +539,14 @@ def load_mcap(path: str | Path, mapping: Mapping | None = None, params=None, joi
         gear = float(params.gear.gear_ratio)
         if own:
             notes.append(f"gear ratio {gear:g} taken from --params")
+    load_side = params_rec is not None and getattr(params_rec.gear, "encoder_side", "motor") == "load"
+    if own and load_side and "position" in plan and "position" not in mapping.columns \
+            and "load_position" not in mapping.columns:
+        # gear.encoder_side: load -> the node's joint_states position is the LOAD's angle behind the transmission
+        # (output side); the rotor's angle is not recorded (its speed is: q_axis_state omega)
+        plan["load_position"] = plan.pop("position")
+        notes.append("joint_states position is the load's angle (gear.encoder_side: load): read as load_position "
+                     "(output side); the rotor's angle is not in the recording")
     if own and "position" in plan and "position" not in mapping.columns:
         if gear is None:
             plan.pop("position")
