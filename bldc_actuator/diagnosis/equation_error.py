@@ -233,8 +233,8 @@ class CommandReplay:
     command until the next sample (a joint controller running at the log rate), or interpolate it linearly over
     ``substeps`` steps per sample (a command updated faster than the log: a speed loop at the current loop's rate,
     a log that keeps every 10th sample). Decided before any finding is judged (:func:`.refit.command_replay`):
-    by the nominal model's replay of the TRAINING windows both ways, or by the log rate when that replay cannot
-    tell them apart."""
+    by the nominal model's replay of the TRAINING windows both ways (the smaller error), or by the log rate when
+    there is nothing to replay."""
 
     hold: bool                    #: True: each logged command held over its sample interval
     substeps: int                 #: replay steps per sample interval (1 when holding)
