@@ -226,6 +226,35 @@ def _noise_std(x: np.ndarray) -> float:
     return float(1.4826 * np.median(np.abs(d - np.median(d))) / math.sqrt(2.0))
 
 
+@dataclass(frozen=True)
+class CommandReplay:
+    """How the window replay applies the logged commands between samples — a property of the drive that made the
+    recording, which its user rarely knows (issue #14, the gym-electric-motor benchmark): ``hold`` each logged
+    command until the next sample (a joint controller running at the log rate), or interpolate it linearly over
+    ``substeps`` steps per sample (a command updated faster than the log: a speed loop at the current loop's rate,
+    a log that keeps every 10th sample). Decided before any finding is judged (:func:`.refit.command_replay`):
+    by the nominal model's replay of the TRAINING windows both ways (the smaller error), or by the log rate when
+    there is nothing to replay."""
+
+    hold: bool                    #: True: each logged command held over its sample interval
+    substeps: int                 #: replay steps per sample interval (1 when holding)
+    decided_by: str               #: "training replay" | "log rate"
+    #: the nominal model's replay error on the training windows, mean over windows, per way ("hold",
+    #: "interpolate") and channel ("current" [A], "velocity" [rad/s])
+    errors: dict = field(default_factory=dict)
+    score: float = float("nan")   #: mean per-window relative error change, interpolated - held (< 0: interpolation better)
+    noise_floor: float = float("nan")   #: z standard errors of that mean over the windows
+    windows: int = 0
+
+    @property
+    def mode(self) -> str:
+        return "hold" if self.hold else "interpolate"
+
+    def to_dict(self) -> dict:
+        return {"mode": self.mode, "substeps": self.substeps, "decided_by": self.decided_by,
+                "errors": self.errors, "score": self.score, "noise_floor": self.noise_floor, "windows": self.windows}
+
+
 @dataclass
 class Context:
     """A recording brought into the model's frame at the raw rate, plus its decimation.
@@ -254,6 +283,9 @@ class Context:
     blocks: dict[str, "Block"] = field(default_factory=dict)
     nuisance: dict[str, Callable] = field(default_factory=dict)   #: always-fitted, never-reported columns
     nuisance_reason: str = ""
+    #: how the window replay applies the logged commands between samples; None: by the log rate alone
+    #: (:func:`.refit.replay_substeps`)
+    command_replay: CommandReplay | None = None
     _col_cache: dict = field(default_factory=dict)
     _inst_cache: dict = field(default_factory=dict)
     _rows_cache: dict = field(default_factory=dict)

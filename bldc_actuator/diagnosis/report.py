@@ -252,6 +252,15 @@ def _markdown(r: DiagnosisReport, images: dict[str, str]) -> str:
                     L.append(f"| {ch} error RMS, held-out | {_g(th['before'][ch]['holdout_rms'])} | "
                              f"{_g(th['after'][ch]['holdout_rms'])} | K |")
         L.append("")
+        cmd = (c.get("replay") or {}).get("command")
+        if cmd:
+            how = ("each logged command held until the next sample" if cmd["mode"] == "hold" else
+                   f"the logged commands interpolated between samples ({cmd['substeps']} sub-steps per sample)")
+            err = cmd.get("errors") or {}
+            ev = (f": nominal speed error {_g(err['hold']['velocity'])} rad/s held vs "
+                  f"{_g(err['interpolate']['velocity'])} interpolated over {cmd['windows']} training windows"
+                  if err else "")
+            L += [f"Short-window simulation: {how}, decided by the {cmd['decided_by']}{ev}.", ""]
     if r.windows:
         L += ["## When the model breaks (change points of the nominal residual)", "",
               "| equation | from [s] | to [s] | RMS | x quietest |", "|---|---|---|---|---|"]

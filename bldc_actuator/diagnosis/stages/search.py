@@ -166,6 +166,12 @@ def run(signals, params: ActuatorParams, options, say: Say) -> Search | None:
     nominal_fit = ee.fit_columns(ctx, nominal_cols, list(ctx.nuisance), {eq: 1.0 for eq in ctx.blocks})
     replay_nominal, starts_ho = None, []
     if options.replay:
+        # how the replay applies the logged commands between samples: decided from the training windows, before
+        # anything is judged, and kept on the context for every replay after it
+        starts_tr = refit.windows(ctx, options.window_s, options.max_windows, "train")
+        ctx.command_replay = refit.command_replay(ctx, params, starts_tr, options.window_s)
+        ctx.notes.append(refit.command_replay_note(ctx.command_replay, ctx.fs))
+        say(f"2/6 compare: {ctx.notes[-1]}")
         starts_all = refit.windows(ctx, options.window_s, options.max_windows, "all")
         starts_ho = refit.windows(ctx, options.window_s, options.max_windows, "holdout")
         replay_nominal = refit.replay(ctx, [params], starts_all, options.window_s)[0] if starts_all else None
