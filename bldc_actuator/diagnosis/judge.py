@@ -5,7 +5,10 @@ the code the node runs — reproduce held-out data better WITH the finding than 
 parameters without that finding (leave one out), replays the held-out windows under all parameter sets in ONE
 ``BatchActuator`` run (multiple shooting from recorded states, :func:`.refit.replay`), and compares, window by
 window, the simulated error of the finding's channel (speed for torque-side effects, current for voltage-side
-and tracking effects). The noise floor is the spread of that paired difference over windows: a finding is
+and tracking effects). Torque-side findings are judged in the replay driven by the MEASURED current wherever it
+is recorded (nothing of the drive's internals needed; each set's current-noise drift taken out,
+:func:`noise_drift`), the closed-loop one only where that cannot resolve them and :func:`drive_check` passes.
+The noise floor is the spread of that paired difference over windows: a finding is
 ``confirmed`` when the mean improvement exceeds ``z`` standard errors, ``worsens`` when the other channel gets
 worse by more than that AND by more than ``tolerance`` (the practical-significance tolerance, default 5 %) of its
 error: a term that fixes its own channel several-fold is not refused for a 1 % side effect the windows resolve.
@@ -199,7 +202,8 @@ def _verdict_current_driven(without: np.ndarray, with_: np.ndarray, drift_withou
     errors with each set's expected noise drift (:func:`noise_drift`) taken out: both sets integrate the same
     noise, scaled by their own K / J, so its share of the squared error differs by ``drift_without² -
     drift_with²`` in expectation (the cross term with the model error has zero mean). Reported ``without`` and
-    ``with`` are those noise-corrected RMS errors (floored at 0); ``raw`` the uncorrected ones."""
+    ``with`` are the replay's RMS errors as simulated, ``noise_corrected`` those with the drift taken out
+    (floored at 0), ``improvement`` and ``noise_floor`` in that corrected RMS."""
     a, b = np.square(np.asarray(without, float)), np.square(np.asarray(with_, float))
     d = (a - drift_without ** 2) - (b - drift_with ** 2)
     d = d[np.isfinite(d)]
@@ -222,10 +226,11 @@ def _verdict_current_driven(without: np.ndarray, with_: np.ndarray, drift_withou
         verdict = "not confirmed"
     # the noise floor in error units: the paired spread of the squared errors, at the mean error level
     scale = 2.0 * max(e0, e1, 1e-12)
-    return {"channel": "velocity", "without": e0, "with": e1, "improvement": e0 - e1,
+    raw0 = float(np.sqrt(np.mean(a)))
+    return {"channel": "velocity", "without": raw0, "with": raw1, "improvement": e0 - e1,
             "noise_floor": z * se / scale if math.isfinite(se) else float("nan"),
             "improvement_squared": imp, "noise_floor_squared": z * se,
-            "raw": {"without": float(np.sqrt(np.mean(a))), "with": raw1},
+            "noise_corrected": {"without": e0, "with": e1},
             "noise_drift": {"without": drift_without, "with": drift_with},
             "other_channel": None, "other_channel_change": None, "verdict": verdict, "windows": n,
             "window_s": window_s, "replay": REPLAY_MEASURED_CURRENT}
