@@ -130,7 +130,13 @@ def simulate_findings(ctx, sel, pars, lib, starts: list[int], window_s: float, z
             # the measured-current replay decides, unless it cannot resolve the finding (neither better nor
             # worse beyond its noise floor, or its speed far off) and the emulated drive reproduces the current
             decided = cd["verdict"] == "confirmed" or _worse(cd)
-            if not decided and check["ok"]:
+            # ...and where the emulated drive reproduces the recorded current closely, a closed-loop replay that
+            # the finding makes worse beyond its floor refuses it too: the measured current's own errors (a
+            # sensor's, or the torque's timing) can favour a spurious term (builtin case r_thermal_30min: a
+            # viscous term 0.94 -> 2.97 rad/s in the closed loop, "confirmed" 3.19 -> 2.60 driven by the
+            # measured current, with the drive's current reproduced to 0.2 % of its RMS)
+            contradicted = check["close"] and (_worse(closed) or str(closed["verdict"]).startswith("worsens"))
+            if (not decided and check["ok"]) or (cd["verdict"] == "confirmed" and contradicted):
                 out[e] = dict(closed, measured_current_replay=_brief(cd))
             else:
                 out[e] = dict(cd, closed_loop_replay=_brief(closed))
@@ -240,17 +246,22 @@ def _verdict_current_driven(without: np.ndarray, with_: np.ndarray, drift_withou
 #: by less than this fraction of the recorded current's RMS, or by less than this many times its sensor noise
 DRIVE_CHECK_FRACTION = 0.3
 DRIVE_CHECK_NOISE = 1.5
+#: ... and reproduces it closely (its closed-loop verdict can then refuse a torque-side finding the measured-current
+#: replay confirms) when the error is below this fraction of the recorded current's RMS (the third-party tp_kt
+#: drive, no back-EMF feed-forward behind a file that says it has one: 0.33; builtin cases: <= 0.02)
+DRIVE_CHECK_CLOSE = 0.1
 
 
 def drive_check(ctx, full: dict[str, Any]) -> dict[str, Any]:
     """Does the emulated drive (the model's PI current loop from the recorded commands, every finding applied)
-    reproduce the recorded current? ``{"current_error_rms", "current_rms", "current_noise", "ok"}`` [A]."""
+    reproduce the recorded current? ``{"current_error_rms", "current_rms", "current_noise", "ok", "close"}`` [A]."""
     err = float(full.get("current_rms", float("nan")))
     sig = float((full.get("signal_rms") or {}).get("current") or float("nan"))
     i = np.asarray(ctx.sig["i_q"], float)
     noise = float(np.std(i - ctx.dec.lowpass(i))) if len(i) else float("nan")
     ok = bool(math.isfinite(err) and (err <= DRIVE_CHECK_FRACTION * sig or err <= DRIVE_CHECK_NOISE * noise))
-    return {"current_error_rms": err, "current_rms": sig, "current_noise": noise, "ok": ok}
+    close = bool(math.isfinite(err) and math.isfinite(sig) and err <= DRIVE_CHECK_CLOSE * sig)
+    return {"current_error_rms": err, "current_rms": sig, "current_noise": noise, "ok": ok, "close": close}
 
 
 def _why_not_simulated(p: dict[str, dict]) -> str:
