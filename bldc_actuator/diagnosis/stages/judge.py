@@ -42,8 +42,8 @@ def _harmful(v: dict) -> bool:
     be simulated at all)."""
     if "without" not in v or str(v["verdict"]).startswith("worsens"):
         return True
-    if v.get("improvement_squared") is not None:     # the measured-current replay: its noise drift taken out
-        return bool(v["improvement_squared"] < -v["noise_floor_squared"])
+    if v.get("worse") is not None:     # the measured-current replay: raw and noise-corrected errors both worse
+        return bool(v["worse"])
     floor = v.get("noise_floor")
     return v.get("with") is not None and v["with"] - v["without"] > (floor if floor == floor and floor else 0.0)
 
