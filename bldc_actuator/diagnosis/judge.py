@@ -33,6 +33,10 @@ from . import refit
 _CHANNEL = {"mechanical": "velocity", "electrical": "voltage", "tracking": "current"}
 
 
+#: torque-side in the equations but drive-side in fact: the current sensors' offsets and gains (the drive acts on
+#: what they report), judged by the closed-loop replay where the drive check passes
+_SENSOR_SIDE = ("electrical_angle_ripple",)
+
 #: effects the replay cannot show when a torque sensor is recorded (its reading is the replay's load)
 _LOAD_EFFECTS = ("position_dependent_load",)
 
@@ -121,7 +125,17 @@ def simulate_findings(ctx, sel, pars, lib, starts: list[int], window_s: float, z
         closed = _verdict(r["per_window"], w_full, ch, other, z, tolerance, len(starts), window_s,
                           None if imposed else signal)
         closed["replay"] = REPLAY_CLOSED_LOOP
-        if ch == "velocity" and res_cd is not None:
+        if ch == "velocity" and res_cd is not None and e in _SENSOR_SIDE:
+            # the drive's current sensors: the drive itself is in question, the closed loop judges (as before
+            # issue #14's third-party set), the measured-current replay only where the drive check fails
+            if check["ok"]:
+                out[e] = closed
+            else:
+                k = 1 + effects.index(e)
+                out[e] = _verdict(res_cd[k]["per_window"], res_cd[0]["per_window"], ch, None, z, tolerance,
+                                  len(starts), window_s, None if imposed else res_cd[0].get("signal_rms"))
+                out[e]["replay"] = REPLAY_MEASURED_CURRENT
+        elif ch == "velocity" and res_cd is not None:
             k = 1 + effects.index(e)
             cd = _verdict_current_driven(res_cd[k]["per_window"][ch], res_cd[0]["per_window"][ch],
                                          noise_drift(ctx, p_without, window_s), noise_drift(ctx, full, window_s),
