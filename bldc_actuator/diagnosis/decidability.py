@@ -87,5 +87,6 @@ def undecided_candidates(rejected: list[dict]) -> list[Undecidable]:
     """One reason per candidate the held-out gate could not decide (``verdict: not_decidable`` in the
     selection's rejected list): a large effect is neither found nor absent on this held-out part."""
     return [Undecidable("candidate_not_decidable", f"{r['effect']} ({r.get('form', '')}): {r.get('reason', '')}",
-                        "record a longer held-out part with more varied motion (or give --holdout-file)")
+                        r.get("remedy") or "record a longer held-out part with more varied motion (or give "
+                                           "--holdout-file)")
             for r in rejected if r.get("verdict") == "not_decidable"]

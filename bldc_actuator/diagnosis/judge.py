@@ -5,7 +5,10 @@ the code the node runs — reproduce held-out data better WITH the finding than 
 parameters without that finding (leave one out), replays the held-out windows under all parameter sets in ONE
 ``BatchActuator`` run (multiple shooting from recorded states, :func:`.refit.replay`), and compares, window by
 window, the simulated error of the finding's channel (speed for torque-side effects, current for voltage-side
-and tracking effects). The noise floor is the spread of that paired difference over windows: a finding is
+and tracking effects). Torque-side findings are judged in the replay driven by the MEASURED current wherever it
+is recorded (nothing of the drive's internals needed; each set's current-noise drift taken out,
+:func:`noise_drift`), the closed-loop one only where that cannot resolve them and :func:`drive_check` passes.
+The noise floor is the spread of that paired difference over windows: a finding is
 ``confirmed`` when the mean improvement exceeds ``z`` standard errors, ``worsens`` when the other channel gets
 worse by more than that AND by more than ``tolerance`` (the practical-significance tolerance, default 5 %) of its
 error: a term that fixes its own channel several-fold is not refused for a 1 % side effect the windows resolve.
@@ -29,6 +32,10 @@ from . import refit
 #: since the current loop hides them in the current; current when no voltage was recorded)
 _CHANNEL = {"mechanical": "velocity", "electrical": "voltage", "tracking": "current"}
 
+
+#: torque-side in the equations but drive-side in fact: the current sensors' offsets and gains (the drive acts on
+#: what they report), judged by the closed-loop replay where the drive check passes
+_SENSOR_SIDE = ("electrical_angle_ripple",)
 
 #: effects the replay cannot show when a torque sensor is recorded (its reading is the replay's load)
 _LOAD_EFFECTS = ("position_dependent_load",)
@@ -70,12 +77,15 @@ def simulate_findings(ctx, sel, pars, lib, starts: list[int], window_s: float, z
         return {}
     out: dict[str, dict[str, Any]] = {}
     check = drive_check(ctx, res[0])
-    # torque-side findings: where the emulated drive does not reproduce the recorded current, the replay driven
-    # by the measured current judges them (it needs nothing of the drive's internals; where the drive IS
-    # reproduced the emulation is kept: driven by the noise-free command it does not integrate the current
-    # sensor's noise into the speed)
+    # torque-side findings (friction, loads, cogging, inertia, K_t i): judged by the mechanical equation driven by
+    # the MEASURED current wherever it is recorded (issue #14): it needs nothing of the drive's internals, which
+    # the user rarely knows (a drive without back-EMF feed-forward delivers less than its command while the speed
+    # changes, and an emulated drive that assumes otherwise makes a true K_t look wrong). The closed-loop replay
+    # stays the judge of drive-side effects, and of a torque-side one only where the measured-current replay
+    # cannot resolve it (its sensor noise, integrated over a window, hides a small effect) and the emulated drive
+    # reproduces the recorded current (:func:`drive_check`)
     res_cd = None
-    if not check["ok"] and "current" in ctx.have:
+    if "current" in ctx.have and any(_channel(lib, e) == "velocity" for e in effects):
         res_cd = refit.replay(ctx, sets, starts, window_s, drive="current")
         if not res_cd or not res_cd[0].get("available"):
             res_cd = None
@@ -93,8 +103,7 @@ def simulate_findings(ctx, sel, pars, lib, starts: list[int], window_s: float, z
         if p_without == full:   # the simulated actuator cannot hold it: no term, or a value outside its field
             out[e] = {"verdict": "not simulated", "channel": None, "reason": _why_not_simulated(pars.get(e, {}))}
             continue
-        eqs = [q for q in lib[e].equations if q in _CHANNEL]
-        ch = _CHANNEL[eqs[0]] if eqs else "velocity"
+        ch = _channel(lib, e)
         if ch == "voltage" and w_full.get("voltage") is None:
             ch = "current"
         other = "current" if ch == "velocity" else "velocity"
@@ -113,15 +122,40 @@ def simulate_findings(ctx, sel, pars, lib, starts: list[int], window_s: float, z
                       "noise_floor": float("nan")}
             continue
         imposed = diverges and "torque" in ctx.have      # the other channels follow the imposed motion too
-        if ch == "velocity" and res_cd is not None:
+        closed = _verdict(r["per_window"], w_full, ch, other, z, tolerance, len(starts), window_s,
+                          None if imposed else signal)
+        closed["replay"] = REPLAY_CLOSED_LOOP
+        if ch == "velocity" and res_cd is not None and e in _SENSOR_SIDE:
+            # the drive's current sensors: the drive itself is in question, the closed loop judges (as before
+            # issue #14's third-party set), the measured-current replay only where the drive check fails
+            if check["ok"]:
+                out[e] = closed
+            else:
+                k = 1 + effects.index(e)
+                out[e] = _verdict(res_cd[k]["per_window"], res_cd[0]["per_window"], ch, None, z, tolerance,
+                                  len(starts), window_s, None if imposed else res_cd[0].get("signal_rms"))
+                out[e]["replay"] = REPLAY_MEASURED_CURRENT
+        elif ch == "velocity" and res_cd is not None:
             k = 1 + effects.index(e)
-            out[e] = _verdict(res_cd[k]["per_window"], res_cd[0]["per_window"], ch, None, z, tolerance, len(starts),
-                              window_s, None if imposed else res_cd[0].get("signal_rms"))
-            out[e]["replay"] = "mechanical equation driven by the measured current"
+            cd = _verdict_current_driven(res_cd[k]["per_window"][ch], res_cd[0]["per_window"][ch],
+                                         noise_drift(ctx, p_without, window_s), noise_drift(ctx, full, window_s),
+                                         z, len(starts), window_s,
+                                         None if imposed else (res_cd[0].get("signal_rms") or {}).get(ch))
+            # the measured-current replay decides, unless it cannot resolve the finding (neither better nor
+            # worse beyond its noise floor, or its speed far off) and the emulated drive reproduces the current
+            decided = cd["verdict"] == "confirmed" or _worse(cd)
+            # ...and where the emulated drive reproduces the recorded current closely, a closed-loop replay that
+            # the finding makes worse beyond its floor refuses it too: the measured current's own errors (a
+            # sensor's, or the torque's timing) can favour a spurious term (builtin case r_thermal_30min: a
+            # viscous term 0.94 -> 2.97 rad/s in the closed loop, "confirmed" 3.19 -> 2.60 driven by the
+            # measured current, with the drive's current reproduced to 0.2 % of its RMS)
+            contradicted = check["close"] and (_worse(closed) or str(closed["verdict"]).startswith("worsens"))
+            if (not decided and check["ok"]) or (cd["verdict"] == "confirmed" and contradicted):
+                out[e] = dict(closed, measured_current_replay=_brief(cd))
+            else:
+                out[e] = dict(cd, closed_loop_replay=_brief(closed))
         else:
-            out[e] = _verdict(r["per_window"], w_full, ch, other, z, tolerance, len(starts), window_s,
-                              None if imposed else signal)
-            out[e]["replay"] = "closed-loop drive emulated from the recorded commands"
+            out[e] = closed
         out[e]["drive_check"] = check
         if temps and out[e]["verdict"] == "confirmed":
             # the temperatures are simulated channels too (R, R(T) and the torque constant set the heat)
@@ -134,21 +168,124 @@ def simulate_findings(ctx, sel, pars, lib, starts: list[int], window_s: float, z
     return out
 
 
+REPLAY_CLOSED_LOOP = "closed-loop drive emulated from the recorded commands"
+REPLAY_MEASURED_CURRENT = "mechanical equation driven by the measured current"
+
+
+def _channel(lib, effect: str) -> str:
+    """The simulated channel where ``effect`` shows first (velocity for torque-side effects)."""
+    eqs = [q for q in lib[effect].equations if q in _CHANNEL]
+    return _CHANNEL[eqs[0]] if eqs else "velocity"
+
+
+def _worse(v: dict) -> bool:
+    """The simulated error is larger with the finding than without it beyond the noise floor."""
+    if v.get("worse") is not None:
+        return bool(v["worse"])
+    floor = v.get("noise_floor")
+    return bool(v.get("with") is not None and v.get("without") is not None
+                and v["with"] - v["without"] > (floor if floor == floor and floor else 0.0))
+
+
+def _brief(v: dict) -> dict[str, Any]:
+    """The other replay's verdict and numbers, reported beside the deciding one."""
+    return {k: v.get(k) for k in ("replay", "verdict", "without", "with", "noise_floor")}
+
+
+def current_noise_rms(ctx) -> float:
+    """Per-sample RMS [A] of the recorded q current's sensor noise: what lies above the analysis low-pass,
+    scaled up to the whole band as white noise would be."""
+    i = np.asarray(ctx.sig["i_q"], float)
+    if not len(i):
+        return float("nan")
+    above = float(np.std(i - ctx.dec.lowpass(i)))
+    frac = max(1.0 - ctx.dec.fc / (0.5 * ctx.fs), 0.05)
+    return above / math.sqrt(frac)
+
+
+def noise_drift(ctx, p, window_s: float) -> float:
+    """RMS over a window [rad/s] of the speed random walk the current sensor's noise drives in the replay driven
+    by the measured current under parameters ``p``: the motor torque ``K n`` integrated over ``J``, white noise
+    of per-sample RMS sigma at interval dt: ``(K / J) sigma sqrt(dt T / 2)`` (the mean square of a random walk
+    over [0, T] is half its end variance). Low-passing the current does not remove it (the integral sees the
+    noise below 1/T). It scales with K / J, so a larger torque constant or a smaller inertia replays WORSE by
+    the noise alone (builtin case kt_frame: the true K x1.22 raised the measured-current replay's speed error
+    1.26 -> 1.33 rad/s while the closed-loop one fell 0.66 -> 0.31)."""
+    sigma = current_noise_rms(ctx)
+    m = p.motor
+    return float(m.torque_constant_q / m.rotor_inertia * sigma * math.sqrt(window_s / ctx.fs / 2.0))
+
+
+def _verdict_current_driven(without: np.ndarray, with_: np.ndarray, drift_without: float, drift_with: float,
+                            z: float, n: int, window_s: float, signal: float | None) -> dict[str, Any]:
+    """The leave-one-out verdict in the replay driven by the measured current, on per-window MEAN SQUARED speed
+    errors with each set's expected noise drift (:func:`noise_drift`) taken out: both sets integrate the same
+    noise, scaled by their own K / J, so its share of the squared error differs by ``drift_without² -
+    drift_with²`` in expectation (the cross term with the model error has zero mean). Reported ``without`` and
+    ``with`` are the replay's RMS errors as simulated, ``noise_corrected`` those with the drift taken out
+    (floored at 0), ``improvement`` and ``noise_floor`` in that corrected RMS."""
+    a, b = np.square(np.asarray(without, float)), np.square(np.asarray(with_, float))
+    ok = np.isfinite(a) & np.isfinite(b)
+    a, b = a[ok], b[ok]
+
+    def paired(d):
+        return (float(np.mean(d)), float(np.std(d, ddof=1) / math.sqrt(len(d)))) if len(d) >= 3 else (
+            float("nan"), float("nan"))
+    imp, se = paired((a - drift_without ** 2) - (b - drift_with ** 2))
+    imp_raw, se_raw = paired(a - b)
+    # the drift is an estimate (sigma from the current above the low-pass, taken as white): over-estimated it
+    # would favour a larger K or a smaller J as surely as the raw errors disfavour them (a 4 s null recording: a
+    # spurious J x0.49, raw 0.27 -> 0.55 rad/s, "better" by a drift estimated at 0.33 -> 0.68). So a verdict
+    # needs both: confirmed when the corrected AND the raw errors improve beyond their floors, worse when both
+    # get worse; else the replay cannot resolve it
+    better = imp > z * se and imp > 0 and imp_raw > z * se_raw
+    worse = imp < -z * se and imp_raw < -z * se_raw
+    e0 = math.sqrt(max(float(np.mean(a)) - drift_without ** 2, 0.0))
+    e1 = math.sqrt(max(float(np.mean(b)) - drift_with ** 2, 0.0))
+    raw1 = float(np.sqrt(np.mean(b)))
+    if not math.isfinite(imp):
+        verdict = "not checkable in simulation"
+    elif signal and raw1 > REPRODUCE_MAX * signal and e1 > REPRODUCE_MAX * signal:
+        verdict = (f"not checkable in simulation: the simulated actuator does not reproduce this recording's "
+                   f"velocity (error {raw1:.3g} RMS = {100 * raw1 / signal:.0f} % of the recorded {signal:.3g} RMS, "
+                   f"with every finding)")
+    elif better:
+        verdict = "confirmed"
+    else:
+        verdict = "not confirmed"
+    # the noise floor in error units: the paired spread of the squared errors, at the mean error level
+    scale = 2.0 * max(e0, e1, 1e-12)
+    raw0 = float(np.sqrt(np.mean(a)))
+    return {"channel": "velocity", "without": raw0, "with": raw1, "improvement": e0 - e1,
+            "noise_floor": z * se / scale if math.isfinite(se) else float("nan"),
+            "improvement_squared": imp, "noise_floor_squared": z * se, "worse": bool(worse),
+            "improvement_squared_raw": imp_raw, "noise_floor_squared_raw": z * se_raw,
+            "noise_corrected": {"without": e0, "with": e1},
+            "noise_drift": {"without": drift_without, "with": drift_with},
+            "other_channel": None, "other_channel_change": None, "verdict": verdict, "windows": n,
+            "window_s": window_s, "replay": REPLAY_MEASURED_CURRENT}
+
+
 #: the emulated drive reproduces the recording when its simulated current misses the recorded (low-passed) one
 #: by less than this fraction of the recorded current's RMS, or by less than this many times its sensor noise
 DRIVE_CHECK_FRACTION = 0.3
 DRIVE_CHECK_NOISE = 1.5
+#: ... and reproduces it closely (its closed-loop verdict can then refuse a torque-side finding the measured-current
+#: replay confirms) when the error is below this fraction of the recorded current's RMS (the third-party tp_kt
+#: drive, no back-EMF feed-forward behind a file that says it has one: 0.33; builtin cases: <= 0.02)
+DRIVE_CHECK_CLOSE = 0.1
 
 
 def drive_check(ctx, full: dict[str, Any]) -> dict[str, Any]:
     """Does the emulated drive (the model's PI current loop from the recorded commands, every finding applied)
-    reproduce the recorded current? ``{"current_error_rms", "current_rms", "current_noise", "ok"}`` [A]."""
+    reproduce the recorded current? ``{"current_error_rms", "current_rms", "current_noise", "ok", "close"}`` [A]."""
     err = float(full.get("current_rms", float("nan")))
     sig = float((full.get("signal_rms") or {}).get("current") or float("nan"))
     i = np.asarray(ctx.sig["i_q"], float)
     noise = float(np.std(i - ctx.dec.lowpass(i))) if len(i) else float("nan")
     ok = bool(math.isfinite(err) and (err <= DRIVE_CHECK_FRACTION * sig or err <= DRIVE_CHECK_NOISE * noise))
-    return {"current_error_rms": err, "current_rms": sig, "current_noise": noise, "ok": ok}
+    close = bool(math.isfinite(err) and math.isfinite(sig) and err <= DRIVE_CHECK_CLOSE * sig)
+    return {"current_error_rms": err, "current_rms": sig, "current_noise": noise, "ok": ok, "close": close}
 
 
 def _why_not_simulated(p: dict[str, dict]) -> str:

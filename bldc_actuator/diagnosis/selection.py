@@ -467,3 +467,70 @@ def forward_select(ctx: Context, loc: dict, lib: dict[str, Candidate], names: li
     return SelectionResult(accepted, base, nominal, cols, weights,
                            _rejected(last_eval, accepted, aliases, early_rejected, removed), aliases, not_checkable,
                            rounds, removed, iterating)
+
+
+def unexcited_aliases(ctx: Context, loc: dict, lib: dict[str, Candidate], sel: SelectionResult,
+                      gate: GateConfig) -> list[dict[str, Any]]:
+    """Accepted effects that a candidate this recording does NOT excite would explain as well (issue #14).
+
+    A candidate is "not checkable" when the data lacks what sets it apart from the rest of the model (dead time
+    needs current of both signs: with a one-signed current its column ``sign(i)`` is a constant). That is exactly
+    when it may hide behind an accepted effect: with a current that never reverses and changes little, ``R i`` and
+    the dead-time offset are the same column, and a dead time is named a resistance error. For each accepted
+    effect X and each such candidate Y sharing one of its equations, Y's forms replace X's in the final fit;
+    when the two fitted contributions correlate above ``gate.alias_corr`` (the selection's alias criterion) the
+    pair is returned with ``delta_bic`` (> 0: Y fits the training data better than X) and the experiment that
+    separates them (what Y needs to be excited). Plain data: ``{"effects": [X, Y], "correlation", "delta_bic",
+    "unexcited": Y, "why": the not-checkable reason, "experiment", "parameters": Y's fitted values}``."""
+    out: list[dict[str, Any]] = []
+    if not sel.accepted or sel.final_fit is None:
+        return out
+    prefix = "data does not excite it: "
+    for nc in sel.not_checkable:
+        y = nc.get("effect")
+        why = str(nc.get("reason", ""))
+        if y not in lib or not why.startswith(prefix) or lib[y].variants is None:
+            continue
+        cand = lib[y]
+        try:
+            variants = cand.variants(ctx, loc) or []
+        except (ValueError, KeyError, IndexError, FloatingPointError):
+            continue
+        for a in sel.accepted:
+            if not set(cand.equations) & set(lib[a.effect].equations):
+                continue
+            keys_without = [k for k in sel.final_fit.keys if k not in a.added]
+            its = {k: v for k, v in sel.iterating.items() if k in keys_without}
+            cw = _contribution(ctx, sel.final_fit, sel.cols, a.added, sel.weights)
+            best = None
+            for v in variants:
+                cols = dict(sel.cols)
+                for k, b in v.columns.items():
+                    if k not in cols:
+                        cols[k] = ctx.column(k, b)
+                added = [k for k in v.keys if k not in keys_without]
+                if not added:
+                    continue
+                f = fit_model(ctx, cols, keys_without + added, sel.weights, its)
+                c = _corr(cw, _contribution(ctx, f, cols, added, sel.weights))
+                d = delta_bic(sel.final_fit, f)
+                if c >= gate.alias_corr and (best is None or d > best[1]):
+                    best = (c, d, v, f, added)
+            if best is None:
+                continue
+            c, d, v, f, added = best
+            need = why[len(prefix):]
+            try:
+                coef = f.coef()
+                idx = [f.keys.index(k) for k in added]
+                pars = cand.to_params(np.array([coef[k] for k in added]), f.cov[np.ix_(idx, idx)], added, v, ctx) \
+                    if cand.to_params else {}
+                values = {k: float(p["value"]) for k, p in pars.items()
+                          if isinstance(p, dict) and isinstance(p.get("value"), (int, float))}
+            except (ValueError, KeyError, IndexError, TypeError):
+                values = {}
+            out.append({"effects": [a.effect, y], "correlation": round(c, 3), "delta_bic": round(d, 1),
+                        "unexcited": y, "form": v.label, "why": why, "parameters": values,
+                        "experiment": (lib[a.effect].confusable.get(y) or cand.confusable.get(a.effect)
+                                       or f"record data that excites {y} ({need}): there the two forms differ")})
+    return out

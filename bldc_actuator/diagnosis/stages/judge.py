@@ -16,7 +16,7 @@ import time
 
 from .. import drive_modes, judge, refit, significance
 from ..candidates import SPECIAL
-from ..selection import forward_select
+from ..selection import forward_select, unexcited_aliases
 from .data import Judgement, Say, Search
 
 #: simulated verdicts that keep a finding ("not simulated" does not: with the gate on, a finding the simulated
@@ -42,6 +42,8 @@ def _harmful(v: dict) -> bool:
     be simulated at all)."""
     if "without" not in v or str(v["verdict"]).startswith("worsens"):
         return True
+    if v.get("worse") is not None:     # the measured-current replay: raw and noise-corrected errors both worse
+        return bool(v["worse"])
     floor = v.get("noise_floor")
     return v.get("with") is not None and v["with"] - v["without"] > (floor if floor == floor and floor else 0.0)
 
@@ -63,6 +65,36 @@ def _refit_linear(s: Search, sel):
     return ff, refit.effect_parameters(s.ctx, sel, ff, s.lib)
 
 
+def _unexcited_aliases(s: Search, sel, options, say: Say) -> None:
+    """An accepted effect that a candidate this recording does not excite explains as well
+    (:func:`..selection.unexcited_aliases`; a dead time under a current that never reverses is a constant offset,
+    and so is ``R i`` when the current hardly changes) is never a clean finding: it stays (the simulated actuator
+    judges it as usual), reported with the alias, and the verdict carries "not decidable" which of the two, with
+    the experiment that separates them. The training data's preference (ΔBIC) is reported, not used: with a
+    nearly constant current the ``R i`` column is mostly its sensor noise, and a true resistance error fitted
+    WORSE than the noise-free constant (ΔBIC -20 on a generated one-signed recording). When the accepted form
+    fits better by more than the BIC threshold the data separates them: nothing is said."""
+    thr = options.gate.bic_threshold
+    for al in unexcited_aliases(s.ctx, s.located, s.lib, sel, options.gate):
+        x, y = al["effects"]
+        if al["delta_bic"] < -thr:
+            say(f"4/6 attribute: {x} ~ {y} ({y} not checkable here): the training data separates them (ΔBIC "
+                f"{al['delta_bic']:+.1f} for {y})")
+            continue
+        vals = ", ".join(f"{k} = {v:.3g}" for k, v in al["parameters"].items())
+        sel.aliases.append({"effects": [x, y], "chosen": x, "correlation": al["correlation"],
+                            "decided_by": f"{y} cannot be checked here ({al['why']}); which of the two is not "
+                                          f"decidable with this data (ΔBIC {al['delta_bic']:+.1f} for {y})",
+                            "experiment": al["experiment"], "unexcited": y})
+        reason = (f"{x} and {y} explain the same residual in this recording (fitted contributions correlate "
+                  f"{al['correlation']:.2f}) and {y} cannot be checked here ({al['why']}): {x} is reported, but "
+                  f"which of the two it is, is not decidable with this data (training ΔBIC {al['delta_bic']:+.1f} "
+                  f"for {y}{'; ' + y + ' would be ' + vals if vals else ''})")
+        sel.rejected.append({"effect": y, "form": al["form"], "verdict": "not_decidable", "reason": reason,
+                             "remedy": al["experiment"], "alias_of": x, "parameters": al["parameters"]})
+        say(f"4/6 attribute: {x} ~ {y}: {reason}")
+
+
 def run(s: Search, options, say: Say) -> Judgement:
     t0 = time.perf_counter()
     ctx, lib, sel, special = s.ctx, s.lib, s.selection, dict(s.special)
@@ -75,6 +107,8 @@ def run(s: Search, options, say: Say) -> Judgement:
         sel, alias_records = judge.arbitrate_aliases(
             ctx, sel, lambda out: forward_select(ctx, s.located, lib, [n for n in linear if n not in out], options.gate),
             lib, starts, win, progress=lambda m: say(f"4/6 attribute: {m}"))
+    if sel.accepted:
+        _unexcited_aliases(s, sel, options, say)
     say(f"4/6 attribute: accepted {[a.effect for a in sel.accepted] + [f['effect'] for f in special['findings']] or 'nothing'}; "
         f"{len(sel.not_checkable) + len(special['not_checkable'])} not checkable")
 
@@ -117,6 +151,12 @@ def run(s: Search, options, say: Say) -> Judgement:
                 say(f"5/6 judge: {v.message}")
             sel.accepted = [a for a in sel.accepted if a.effect not in {v.effect for v in again}]
             ff, pars = _refit_linear(s, sel)
+    kept = {a.effect for a in sel.accepted}
+    sel.aliases = [a for a in sel.aliases if not a.get("unexcited") or a["chosen"] in kept]
+    for r in sel.rejected:      # the not-decidable record stays: the residual is there, and so is the question
+        if r.get("alias_of") and r["alias_of"] not in kept and r.get("verdict") == "not_decidable":
+            r["reason"] = r["reason"].replace(f"{r['alias_of']} is reported, but which",
+                                              f"{r['alias_of']} was then refused, and which")
     params_linear, notes, not_sim = refit.updated_params(ctx, sel, pars, lib)
 
     # thermal network: full-length thermal simulation of the model with the linear findings (leave one out)

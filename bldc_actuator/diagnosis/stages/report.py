@@ -104,7 +104,8 @@ def _aliases(sel, lib) -> list[dict]:
     out = []
     for a in sel.aliases:
         A, B = a["effects"]
-        exp = lib[A].confusable.get(B) or lib[B].confusable.get(A) or "record data that excites them differently"
+        exp = (a.get("experiment") or lib[A].confusable.get(B) or lib[B].confusable.get(A)
+               or "record data that excites them differently")
         out.append({"effects": [A, B], "chosen": a["chosen"], "correlation": a["correlation"],
                     "message": f"cannot tell {A} from {B} with this data (their fitted contributions "
                                f"correlate {a['correlation']:.2f}); "
