@@ -64,3 +64,22 @@ def test_kt_behind_a_drive_without_feedforward_simulates_better_with_the_identif
     found, file_drive = refit.replay(ctx, [up, up.replace(**{"drive.decoupling_enabled": True})], starts, 0.1)
     assert found["current_rms"] < file_drive["current_rms"]
     assert found["velocity_rms"] < file_drive["velocity_rms"]
+
+
+def test_drive_check_excuses_only_the_noise_the_low_pass_leaves():
+    """The emulated drive's current is compared with the LOW-PASSED recording: an error within 1.5 x the raw
+    sensor noise but above 1.5 x the noise left after the low-pass is a drive that does not reproduce the current
+    (third-party tp_kt: 0.0243 A against a raw noise of 0.0265 A), unless it is small against the current itself."""
+    from bldc_actuator.diagnosis import judge
+
+    sig = steps_recording(FILE, duration=4.0, seed=6, noise=0.05)
+    ctx = ee.prepare([(sig, False)], FILE, fc=None, holdout=0.3)
+    probe = judge.drive_check(ctx, {"current_rms": 0.0, "signal_rms": {"current": 1.0}})
+    raw, left = probe["current_noise"], probe["current_noise_lowpassed"]
+    assert left < 0.7 * raw      # the low-pass removes most of the white noise
+    assert left == pytest.approx(judge.current_noise_rms(ctx) * (ctx.dec.fc / (0.5 * ctx.fs)) ** 0.5)
+    tiny_signal = {"current": 1e-3}          # the fraction-of-signal clause cannot pass
+    between = judge.drive_check(ctx, {"current_rms": 1.4 * raw, "signal_rms": tiny_signal})
+    assert 1.4 * raw > 1.5 * left and not between["ok"]
+    assert judge.drive_check(ctx, {"current_rms": 1.4 * left, "signal_rms": tiny_signal})["ok"]
+    assert judge.drive_check(ctx, {"current_rms": 1.4 * raw, "signal_rms": {"current": 10 * raw}})["ok"]
