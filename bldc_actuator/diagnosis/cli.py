@@ -159,8 +159,9 @@ def _print_summary(report, args) -> None:
             print(f"  {'not decidable' if report.verdict_kind == 'not decidable' else 'caveat'}: {u.code}: "
                   f"what to do: {u.remedy}")
     for f in report.findings:
-        pars = ", ".join(f"{k}={_fmt(v)}±{_fmt(f['uncertainty'].get(k))}" for k, v in f["parameters"].items()
-                         if not isinstance(v, str))
+        unc = f["uncertainty"]
+        pars = ", ".join(f"{k}={_fmt(v)}" + ("" if unc.get(k) is None else f"±{_fmt(unc[k])}")
+                         for k, v in f["parameters"].items() if not isinstance(v, str))
         tag = ("" if f.get("simulated", True) else " [not yet simulated]") + \
             (" [not checkable in simulation]" if f.get("not_checkable_in_simulation") else "")
         ho = f.get("held_out") or {}
@@ -195,6 +196,8 @@ def _print_summary(report, args) -> None:
 
 
 def _fmt(x) -> str:
+    if isinstance(x, bool):         # a drive option (drive.decoupling_enabled): as the parameter file spells it
+        return str(x).lower()
     try:
         return f"{float(x):.4g}"
     except (TypeError, ValueError):

@@ -286,6 +286,11 @@ class Context:
     #: how the window replay applies the logged commands between samples; None: by the log rate alone
     #: (:func:`.refit.replay_substeps`)
     command_replay: CommandReplay | None = None
+    #: drive settings identified from the recording before anything is judged (``drive.decoupling_enabled``,
+    #: :func:`.drive_feedforward.identify`): every updated parameter set carries them
+    drive_updates: dict = field(default_factory=dict)
+    #: that identification's result (findings, rejected, not_checkable, simulation), reported by the judge stage
+    drive_identified: dict | None = None
     _col_cache: dict = field(default_factory=dict)
     _inst_cache: dict = field(default_factory=dict)
     _rows_cache: dict = field(default_factory=dict)

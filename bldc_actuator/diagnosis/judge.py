@@ -283,14 +283,23 @@ DRIVE_CHECK_CLOSE = 0.1
 
 def drive_check(ctx, full: dict[str, Any]) -> dict[str, Any]:
     """Does the emulated drive (the model's PI current loop from the recorded commands, every finding applied)
-    reproduce the recorded current? ``{"current_error_rms", "current_rms", "current_noise", "ok", "close"}`` [A]."""
+    reproduce the recorded current? ``{"current_error_rms", "current_rms", "current_noise",
+    "current_noise_lowpassed", "ok", "close"}`` [A].
+
+    The simulated current is compared with the LOW-PASSED recording, so the noise it can be excused is the noise
+    left after the low-pass (the sensor's white noise in the pass band), not the raw sensor noise: the
+    third-party tp_kt drive (no back-EMF feed-forward behind a file that says it has one) missed the current by
+    0.0243 A, within 1.5 x the raw noise 0.0265 A, but far above what the low-pass leaves."""
     err = float(full.get("current_rms", float("nan")))
     sig = float((full.get("signal_rms") or {}).get("current") or float("nan"))
     i = np.asarray(ctx.sig["i_q"], float)
     noise = float(np.std(i - ctx.dec.lowpass(i))) if len(i) else float("nan")
-    ok = bool(math.isfinite(err) and (err <= DRIVE_CHECK_FRACTION * sig or err <= DRIVE_CHECK_NOISE * noise))
+    left = current_noise_rms(ctx) * math.sqrt(min(ctx.dec.fc / (0.5 * ctx.fs), 1.0)) if len(i) else float("nan")
+    ok = bool(math.isfinite(err) and (err <= DRIVE_CHECK_FRACTION * sig
+                                      or (err <= DRIVE_CHECK_NOISE * noise and err <= DRIVE_CHECK_NOISE * left)))
     close = bool(math.isfinite(err) and math.isfinite(sig) and err <= DRIVE_CHECK_CLOSE * sig)
-    return {"current_error_rms": err, "current_rms": sig, "current_noise": noise, "ok": ok, "close": close}
+    return {"current_error_rms": err, "current_rms": sig, "current_noise": noise, "current_noise_lowpassed": left,
+            "ok": ok, "close": close}
 
 
 def _why_not_simulated(p: dict[str, dict]) -> str:

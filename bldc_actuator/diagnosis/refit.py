@@ -244,6 +244,7 @@ def _within_limits(spec, v, notes: list[str], fld: str):
 def updated_params(ctx: Context, sel: SelectionResult, pars: dict[str, dict], lib: dict[str, Candidate]):
     """New :class:`ActuatorParams` with the accepted effects switched on; returns (params, notes, not_simulated)."""
     flat = ctx.params.to_flat()
+    flat.update(ctx.drive_updates)      # the drive's settings identified from the recording (drive_feedforward)
     notes: list[str] = []
     not_sim: list[str] = []
     accepted = [a.effect for a in sel.accepted]

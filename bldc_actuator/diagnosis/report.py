@@ -154,6 +154,8 @@ def _g(x, fmt=".4g"):
         return "–"
     if isinstance(x, str):
         return x
+    if isinstance(x, bool):         # a drive option (drive.decoupling_enabled): as the parameter file spells it
+        return str(x).lower()
     try:
         if not math.isfinite(float(x)):
             return "–"

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import time
 
-from .. import drive_modes, judge, refit, significance
+from .. import drive_feedforward, drive_modes, judge, refit, significance
 from ..candidates import SPECIAL
 from ..selection import forward_select, unexcited_aliases
 from .data import Judgement, Say, Search
@@ -187,6 +187,13 @@ def run(s: Search, options, say: Say) -> Judgement:
             special[k] = special[k] + dm[k]
         if dm["simulation"] is not None:
             sim["voltage_limit_mode"] = dm["simulation"]
+    # the drive's feed-forward, identified before anything was judged (:func:`..drive_feedforward.identify`)
+    df = ctx.drive_identified
+    if df is not None:
+        for k in ("findings", "rejected", "not_checkable"):
+            special[k] = special[k] + df[k]
+        if df["simulation"] is not None:
+            sim[drive_feedforward.EFFECT] = df["simulation"]
     return Judgement(selection=sel, final=ff, parameters=pars, special=special, verdicts=verdicts, simulation=sim,
                      alias_simulation=alias_records, params_linear=params_linear, notes=notes,
                      not_simulated=not_sim, timing={"judge": time.perf_counter() - t0})

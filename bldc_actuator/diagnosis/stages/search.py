@@ -17,6 +17,7 @@ import numpy as np
 
 from ...params import ActuatorParams
 from .. import candidates as cands
+from .. import drive_feedforward
 from .. import equation_error as ee
 from .. import locate as loc_mod
 from .. import refit
@@ -174,6 +175,15 @@ def run(signals, params: ActuatorParams, options, say: Say) -> Search | None:
         say(f"2/6 compare: {ctx.notes[-1]}")
         starts_all = refit.windows(ctx, options.window_s, options.max_windows, "all")
         starts_ho = refit.windows(ctx, options.window_s, options.max_windows, "holdout")
+        # the drive's feed-forward (the user rarely knows it): decided by the closed-loop replay's current on the
+        # training windows, confirmed on the held-out ones; every updated parameter set carries it
+        ctx.drive_identified = drive_feedforward.identify(ctx, params, starts_tr, starts_ho, options.window_s,
+                                                          tolerance=options.tolerance)
+        ctx.drive_updates = dict(ctx.drive_identified["updated_fields"])
+        dn = drive_feedforward.note(ctx.drive_identified)
+        if dn:
+            ctx.notes.append(dn)
+            say(f"2/6 compare: {dn}")
         replay_nominal = refit.replay(ctx, [params], starts_all, options.window_s)[0] if starts_all else None
     timing["compare"] = time.perf_counter() - t0
     msg = ", ".join(f"{eq} RMS {m['train_rms']:.3g}" for eq, m in ee_metrics(ctx, nominal_fit).items())
