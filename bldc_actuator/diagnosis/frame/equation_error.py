@@ -972,3 +972,20 @@ def heldout_comparison(ctx: Context, base: Fit, new: Fit, weights: dict[str, flo
     else:
         tstat = 0.0
     return {"available": True, "rel": rel, "t": tstat, "per_eq": per_eq, "chunks": int(len(sums))}
+
+
+def rms(x) -> float:
+    x = np.asarray(x, float)
+    x = x[np.isfinite(x)]
+    return float(np.sqrt(np.mean(x ** 2))) if len(x) else float("nan")
+
+
+def ee_metrics(ctx: Context, fit: Fit) -> dict[str, dict[str, float]]:
+    """Equation-error residual RMS per equation on training and held-out rows."""
+    ho = ctx.holdout_dec
+    out = {}
+    for eq, B in ctx.blocks.items():
+        r = fit.resid[eq]
+        out[eq] = {"train_rms": rms(r[B.rows(ho, "train")]), "holdout_rms": rms(r[B.rows(ho, "holdout")]),
+                   "unit": B.unit}
+    return out

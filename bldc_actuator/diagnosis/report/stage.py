@@ -14,11 +14,11 @@ from ..frame import candidates as cands
 from . import decidability, residual_structure
 from ..frame import locate as loc_mod
 from ..frame import simulate as refit
+from ..frame.equation_error import ee_metrics, rms
 from .document import DiagnosisReport
 from ..results import Undecidable, decide
 from ..frame.selection import fit_model
 from ..records import Judgement, Model, Say, Search
-from ..search.stage import ee_metrics, rms
 
 
 def not_checkable(s: Search) -> DiagnosisReport:

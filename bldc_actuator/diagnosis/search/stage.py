@@ -20,25 +20,9 @@ from ..frame import candidates as cands
 from ..frame import equation_error as ee
 from ..frame import locate as loc_mod
 from ..frame import simulate as refit
+from ..frame.equation_error import ee_metrics, rms
 from ..frame.selection import forward_select
 from ..records import Say, Search
-
-
-def rms(x) -> float:
-    x = np.asarray(x, float)
-    x = x[np.isfinite(x)]
-    return float(np.sqrt(np.mean(x ** 2))) if len(x) else float("nan")
-
-
-def ee_metrics(ctx: ee.Context, fit: ee.Fit) -> dict[str, dict[str, float]]:
-    """Equation-error residual RMS per equation on training and held-out rows."""
-    ho = ctx.holdout_dec
-    out = {}
-    for eq, B in ctx.blocks.items():
-        r = fit.resid[eq]
-        out[eq] = {"train_rms": rms(r[B.rows(ho, "train")]), "holdout_rms": rms(r[B.rows(ho, "holdout")]),
-                   "unit": B.unit}
-    return out
 
 
 def _issue_dict(issue) -> dict:
