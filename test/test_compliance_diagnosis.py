@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from bldc_actuator.diagnosis.pipeline import diagnose
-from bldc_actuator.diagnosis.transmission import load_trajectory
+from bldc_actuator.diagnosis.frame.transmission import load_trajectory
 from bldc_actuator.model import Actuator
 from bldc_actuator.params import ActuatorParams
 
@@ -64,7 +64,7 @@ def test_rigid_joint_gets_no_compliance_finding():
 @pytest.mark.parametrize("backlash", [0.0, 0.004])
 def test_load_state_estimated_from_the_rotor_matches_the_simulated_load(backlash):
     """The replay's window starts: the load's angle and speed followed from the rotor's recorded motion at 1 kHz
-    (diagnosis.transmission.load_trajectory through kernel.load_follow) agree with the simulator's own load state
+    (diagnosis.frame.transmission.load_trajectory through kernel.load_follow) agree with the simulator's own load state
     once the start transient has decayed (5 / (zeta w_a) = 0.6 s); with a backlash too."""
     truth = TRUTH.replace(**{"gear.backlash": backlash})
     act = Actuator(truth)
@@ -95,7 +95,7 @@ def test_compliance_column_filter_is_the_load_decoupling_response():
     rotor), 1/(2 zeta) at the anti-resonance (exact: pre-warped), -> 1 far above it (the load stands still)."""
     from scipy.signal import freqz
 
-    from bldc_actuator.diagnosis.candidates import compliance_filter
+    from bldc_actuator.diagnosis.frame.candidates import compliance_filter
 
     fs = 1000.0
     b, a = compliance_filter(F_A, ZETA, fs)

@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from bldc_actuator.diagnosis import refit
+from bldc_actuator.diagnosis.frame import simulate as refit
 from bldc_actuator.model import Actuator
 from bldc_actuator.params import ActuatorParams, controller_motor, keep_controller_of
 
@@ -121,7 +121,7 @@ def test_a_torque_constant_error_behind_a_drive_tuned_on_the_nominal_motor_is_co
     is three times worse (0.087 rad/s; on longer windows and faster motion up to 30 x, see the report)."""
     from test_issue14_judge_helpers import closed_loop_recording
 
-    from bldc_actuator.diagnosis import equation_error as ee
+    from bldc_actuator.diagnosis.frame import equation_error as ee
     from bldc_actuator.diagnosis.pipeline import DiagnoseOptions, diagnose
     from bldc_actuator.params import load_yaml
 

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from bldc_actuator import abc_model, frames, kernel
-from bldc_actuator.diagnosis.candidates import dead_time_q_factor
+from bldc_actuator.diagnosis.frame.candidates import dead_time_q_factor
 from bldc_actuator.diagnosis.pipeline import DiagnoseOptions, diagnose
 from bldc_actuator.diagnosis.signals import Signals
 from bldc_actuator.model import Actuator, ActuatorState

@@ -13,9 +13,9 @@ import math
 import numpy as np
 import pytest
 
-from bldc_actuator.diagnosis import equation_error as ee
-from bldc_actuator.diagnosis import locate
-from bldc_actuator.diagnosis.candidates import EFFECT_NAMES, match_frame_factor
+from bldc_actuator.diagnosis.frame import equation_error as ee
+from bldc_actuator.diagnosis.frame import locate
+from bldc_actuator.diagnosis.frame.candidates import EFFECT_NAMES, match_frame_factor
 from bldc_actuator.diagnosis.pipeline import DiagnoseOptions, diagnose
 from bldc_actuator.diagnosis.signals import Signals
 from bldc_actuator.model import Actuator, ActuatorState

@@ -105,7 +105,8 @@ def test_the_simulation_gate_refuses_what_the_simulation_does_not_confirm():
     """A finding whose leave-one-out replay is no better (here: forced by an impossible noise floor, z huge) is
     refused by the gate and reported with the simulated numbers."""
     import test_diagnosis_analysis as T
-    from bldc_actuator.diagnosis import judge, pipeline
+    from bldc_actuator.diagnosis import pipeline
+    from bldc_actuator.diagnosis.judge import simulated as judge
 
     sig = T.make_recording(T.TRUTHS["coulomb"], seed=2)
     original = judge.simulate_findings

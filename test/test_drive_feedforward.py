@@ -10,8 +10,9 @@ from __future__ import annotations
 
 import pytest
 
-from bldc_actuator.diagnosis import drive_feedforward, refit
-from bldc_actuator.diagnosis import equation_error as ee
+from bldc_actuator.diagnosis import drive_feedforward
+from bldc_actuator.diagnosis.frame import equation_error as ee
+from bldc_actuator.diagnosis.frame import simulate as refit
 from bldc_actuator.diagnosis.pipeline import diagnose
 
 from test_drive_modes import NOMINAL, steps_recording
@@ -70,7 +71,7 @@ def test_drive_check_excuses_only_the_noise_the_low_pass_leaves():
     """The emulated drive's current is compared with the LOW-PASSED recording: an error within 1.5 x the raw
     sensor noise but above 1.5 x the noise left after the low-pass is a drive that does not reproduce the current
     (third-party tp_kt: 0.0243 A against a raw noise of 0.0265 A), unless it is small against the current itself."""
-    from bldc_actuator.diagnosis import judge
+    from bldc_actuator.diagnosis.judge import simulated as judge
 
     sig = steps_recording(FILE, duration=4.0, seed=6, noise=0.05)
     ctx = ee.prepare([(sig, False)], FILE, fc=None, holdout=0.3)

@@ -1,5 +1,5 @@
 """The drive's voltage-limit mode told apart from a recording that reaches the limit (issue #7,
-bldc_actuator/diagnosis/drive_modes.py): recordings of the simulated actuator (current-command steps that run it
+bldc_actuator/diagnosis/judge/drive_modes.py): recordings of the simulated actuator (current-command steps that run it
 to its top speed, with sensor noise and a quantised encoder) whose drive uses one mode, diagnosed against a model
 that says ``proportional``. The modes are identical below the limit (test_voltage_limit.py), so equation error
 cannot see them: the finding must come from the simulation, name the recording's mode, write it into
@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bldc_actuator.diagnosis import drive_modes
-from bldc_actuator.diagnosis import equation_error as ee
+from bldc_actuator.diagnosis.judge import drive_modes
+from bldc_actuator.diagnosis.frame import equation_error as ee
 from bldc_actuator.diagnosis.pipeline import diagnose
 from bldc_actuator.diagnosis.signals import Signals
 from bldc_actuator.model import Actuator
@@ -89,7 +89,7 @@ def test_windows_under_sets_a_batch_cannot_mix_are_simulated_in_groups():
     """Leave-one-out replays compare parameter sets that differ in the current-loop delay, which one BatchActuator
     cannot hold (a 10 kHz log made diagnose stop with that error): each group runs in its own batch, and a set's
     windows come out as they do alone."""
-    from bldc_actuator.diagnosis import refit
+    from bldc_actuator.diagnosis.frame import simulate as refit
 
     sig = steps_recording(NOMINAL, duration=4.0, seed=7)
     ctx = ee.prepare([(sig, False)], NOMINAL, fc=None, holdout=0.3)

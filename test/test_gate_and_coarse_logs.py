@@ -29,8 +29,8 @@ from benchmarks.concealed import cases as C  # noqa: E402
 from benchmarks.concealed import truth as T  # noqa: E402
 from concealed_helpers import diagnose_case  # noqa: E402
 
-from bldc_actuator.diagnosis import equation_error as ee  # noqa: E402
-from bldc_actuator.diagnosis import refit  # noqa: E402
+from bldc_actuator.diagnosis.frame import equation_error as ee  # noqa: E402
+from bldc_actuator.diagnosis.frame import simulate as refit  # noqa: E402
 
 needs_c = pytest.mark.skipif(T._c_library() is None, reason="no C compiler for the truth generator")
 

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from bldc_actuator.diagnosis import selection
+from bldc_actuator.diagnosis.frame import selection
 
 FS = 500.0
 
@@ -123,7 +123,7 @@ def test_few_chunks_pay_with_the_t_distribution_and_one_chunk_cannot_decide():
 def test_an_undecided_candidate_makes_the_verdict_not_decidable():
     """A candidate the held-out gate could not decide (large gain, too few chunks) is not 'nothing missing': the
     verdict is 'not decidable' naming it and the remedy; beside a found effect it is a caveat of 'found'."""
-    from bldc_actuator.diagnosis import decidability
+    from bldc_actuator.diagnosis.report import decidability
     from bldc_actuator.diagnosis.results import FOUND, NOT_DECIDABLE, NOTHING_MISSING, decide
 
     rejected = [{"effect": "viscous_friction", "form": "linear", "reason": "not significant (t = 1.2)"},

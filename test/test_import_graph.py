@@ -96,3 +96,57 @@ def test_no_import_cycles_in_the_package():
     g = _graph()
     assert "bldc_actuator.diagnosis.io.input_profiles" in g["bldc_actuator.diagnosis.io.loaders"]
     assert _cycles(g) == []
+
+
+D = "bldc_actuator.diagnosis"
+#: the method's stages, each a package whose ``stage`` module is its one entry point (issue #14)
+STAGES = ("search", "judge", "fit", "report")
+#: what the shared frame (equation error, effect library, selection, window replays) may use within the diagnosis
+FRAME_MAY_USE = ("frame", "io", "signals", "significance", "results", "threads")
+
+
+def _top(mod: str) -> str:
+    """The diagnosis subpackage or module a module belongs to: ``D.judge.stage`` -> ``judge``; '' outside D."""
+    return mod[len(D) + 1:].split(".")[0] if mod.startswith(D + ".") else ""
+
+
+def _layer_violations(graph: dict[str, set[str]]) -> list[str]:
+    out = []
+    for mod, targets in graph.items():
+        own = _top(mod)
+        for t in sorted(targets):
+            dst = _top(t)
+            if not own or not dst or dst == own:
+                continue
+            if own in STAGES and dst in STAGES:
+                out.append(f"stage {own} imports stage {dst}: {mod} -> {t}")
+            elif own == "frame" and dst not in FRAME_MAY_USE:
+                out.append(f"frame imports {dst}: {mod} -> {t}")
+            elif dst in STAGES and t == f"{D}.{dst}.stage" and own != "pipeline":
+                out.append(f"a stage entry point imported outside the pipeline: {mod} -> {t}")
+    return out
+
+
+def test_the_layer_check_sees_a_stage_importing_another_and_frame_importing_a_stage():
+    g = {f"{D}.report.stage": {f"{D}.search.stage", f"{D}.frame.locate", f"{D}.records"},
+         f"{D}.frame.simulate": {f"{D}.judge.simulated", f"{D}.significance"},
+         f"{D}.cli": {f"{D}.fit.stage"},
+         f"{D}.pipeline": {f"{D}.search.stage", f"{D}.judge.stage"}}
+    assert _layer_violations(g) == [
+        f"stage report imports stage search: {D}.report.stage -> {D}.search.stage",
+        f"frame imports judge: {D}.frame.simulate -> {D}.judge.simulated",
+        f"a stage entry point imported outside the pipeline: {D}.cli -> {D}.fit.stage",
+    ]
+
+
+def test_diagnosis_stages_import_frame_io_results_never_each_other():
+    """search/ judge/ fit/ report/ each hold a ``stage`` module (one entry point) and its helpers; they use the
+    shared frame, io, records and results, never another stage (the pipeline chains them); the frame imports no
+    stage; there is no ``stages`` package left."""
+    g = _graph()
+    assert not any(m == f"{D}.stages" or m.startswith(f"{D}.stages.") for m in g)
+    for s in STAGES:
+        assert f"{D}.{s}.stage" in g, s
+        assert f"{D}.{s}.stage" in g[f"{D}.pipeline"], s
+    assert f"{D}.frame.simulate" in g[f"{D}.judge.simulated"]  # the check reads real imports
+    assert _layer_violations(g) == []

@@ -23,7 +23,7 @@ from bldc_actuator import cli
 from bldc_actuator.diagnosis.io import cleaning
 from bldc_actuator.diagnosis import cli as dcli
 from bldc_actuator.diagnosis.pipeline import TORQUE_BALANCE, DiagnoseOptions, diagnose, route
-from bldc_actuator.diagnosis.report import DiagnosisReport
+from bldc_actuator.diagnosis.report.document import DiagnosisReport
 from bldc_actuator.diagnosis.results import NOT_DECIDABLE, NOTHING_MISSING, decide
 from bldc_actuator.params import ActuatorParams, dump_yaml
 from issue14_generators import NOMINAL, dyno_run, limited_run, pd_run, write_csv

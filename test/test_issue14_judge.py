@@ -11,8 +11,8 @@ import math
 import numpy as np
 import pytest
 
-from bldc_actuator.diagnosis import equation_error as ee
-from bldc_actuator.diagnosis import refit
+from bldc_actuator.diagnosis.frame import equation_error as ee
+from bldc_actuator.diagnosis.frame import simulate as refit
 from bldc_actuator.diagnosis.pipeline import DiagnoseOptions, diagnose
 from bldc_actuator.params import ActuatorParams
 

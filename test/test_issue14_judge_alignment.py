@@ -10,7 +10,7 @@ import pytest
 
 from bldc_actuator.demo import demo_profile
 from bldc_actuator.diagnosis.pipeline import DiagnoseOptions, diagnose
-from bldc_actuator.diagnosis.stages.search import shift_samples
+from bldc_actuator.diagnosis.search.stage import shift_samples
 from bldc_actuator.params import ActuatorParams, load_preset
 
 from test_issue14_judge_helpers import closed_loop_recording, open_loop_recording

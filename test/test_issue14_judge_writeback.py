@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bldc_actuator.diagnosis import output_error
+from bldc_actuator.diagnosis.fit import output_error
 from bldc_actuator.diagnosis.pipeline import DiagnoseOptions, diagnose
 from bldc_actuator.params import ActuatorParams
 
@@ -67,7 +67,7 @@ def test_no_output_error_refit_on_replays_marked_not_checkable(monkeypatch):
     """A finding kept as "not checkable in simulation" (the replay does not reproduce that recording): the
     output-error refit, which would fit values to the simulator's misfit, is not run; the equation-error value
     is written."""
-    from bldc_actuator.diagnosis import judge
+    from bldc_actuator.diagnosis.judge import simulated as judge
 
     real = judge.simulate_findings
 

@@ -1,6 +1,6 @@
 """The replay driven by the measured current (issue #14: the judge of torque-side findings wherever the current is
 recorded) integrates the current sensor's noise into the speed: a random walk whose size the judge takes out of
-each parameter set's squared error (:func:`bldc_actuator.diagnosis.judge.noise_drift`). Without that a larger
+each parameter set's squared error (:func:`bldc_actuator.diagnosis.judge.simulated.noise_drift`). Without that a larger
 torque constant or a smaller inertia replays worse by the noise alone (builtin case kt_frame: the true K x1.22
 raised the replay's speed error 1.26 -> 1.33 rad/s while the closed-loop replay's fell 0.66 -> 0.31)."""
 
@@ -9,8 +9,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bldc_actuator.diagnosis import equation_error as ee
-from bldc_actuator.diagnosis import judge, refit
+from bldc_actuator.diagnosis.frame import equation_error as ee
+from bldc_actuator.diagnosis.judge import simulated as judge
+from bldc_actuator.diagnosis.frame import simulate as refit
 from bldc_actuator.params import ActuatorParams
 
 from test_issue14_judge_helpers import closed_loop_recording

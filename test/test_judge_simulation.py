@@ -1,4 +1,4 @@
-"""The held-out simulation as judge (bldc_actuator/diagnosis/judge.py), beyond the leave-one-out verdicts that
+"""The held-out simulation as judge (bldc_actuator/diagnosis/judge/simulated.py), beyond the leave-one-out verdicts that
 test_issue7_symptoms.py covers: it decides between aliased forms (arbitrate_aliases) and judges the drive's fitted
 voltage limit (judge_voltage_limit).
 
@@ -52,11 +52,11 @@ def test_the_simulator_replaces_a_load_equation_error_preferred_by_the_simpler_f
     """arbitrate_aliases on the old symptom, built directly: a selection that named position_dependent_load
     (sin/cos of the angle + constant) with the friction asymmetry as its alias. Both replay the held-out windows
     alike, so the form with fewer parameters replaces it."""
-    from bldc_actuator.diagnosis import judge
-    from bldc_actuator.diagnosis.candidates import SPECIAL
+    from bldc_actuator.diagnosis.judge import simulated as judge
+    from bldc_actuator.diagnosis.frame.candidates import SPECIAL
     from bldc_actuator.diagnosis.pipeline import DiagnoseOptions
-    from bldc_actuator.diagnosis.selection import forward_select
-    from bldc_actuator.diagnosis.stages import search
+    from bldc_actuator.diagnosis.frame.selection import forward_select
+    from bldc_actuator.diagnosis.search import stage as search
 
     tr, ho, p = case_recordings(C.reseeded(C.get_case("asymmetric"), 1), tmp_path)
     opts = DiagnoseOptions(holdout_signals=ho, progress=False)

@@ -524,7 +524,7 @@ def test_dead_time_voltage_is_compensated_by_the_current_loop():
     assert s.v_d == pytest.approx(R * s.i_d - e_d, abs=1e-4)
     assert math.hypot(e_d, e_q) > 0.5 * v_dt          # a real correction, not a no-op
     # the angle average of e_q per V_dt that diagnose uses to turn a fitted voltage into drive.dead_time
-    from bldc_actuator.diagnosis.candidates import dead_time_q_factor
+    from bldc_actuator.diagnosis.frame.candidates import dead_time_q_factor
 
     grid = np.linspace(0.0, 2 * np.pi, 200001)[:-1]
     a, b, c = frames.dq_to_abc(0.0, 1.0, grid)

@@ -17,8 +17,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bldc_actuator.diagnosis import equation_error as ee
-from bldc_actuator.diagnosis import refit
+from bldc_actuator.diagnosis.frame import equation_error as ee
+from bldc_actuator.diagnosis.frame import simulate as refit
 from bldc_actuator.diagnosis.pipeline import DiagnoseOptions, diagnose
 from bldc_actuator.diagnosis.signals import Signals
 from bldc_actuator.model import Actuator

@@ -1,6 +1,6 @@
 """Current-sensor errors named by diagnose are written back as drive parameters the simulated controller acts on
 (issue #7, "simulate every effect you can name"): the order-p ripple as sensor offsets, the order-2p ripple as a
-gain mismatch. The maps from the fitted ripple to the sensor parameters (bldc_actuator/diagnosis/refit.py, built
+gain mismatch. The maps from the fitted ripple to the sensor parameters (bldc_actuator/diagnosis/frame/simulate.py, built
 on frames.abc_to_dq) are checked against the kernel's own sensor model (kernel.measured_current_dq), and the
 gain mismatch end to end: a recording of an actuator whose phase-a/b sensors read 5 % high / 5 % low under a known 1 N·m load, logged as
 its drive logs it (the measured current), is diagnosed, and the written gains reproduce the truth."""
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from bldc_actuator.diagnosis.pipeline import diagnose
-from bldc_actuator.diagnosis.refit import sensor_gains_for_q_ripple, sensor_offsets_for_q_ripple
+from bldc_actuator.diagnosis.frame.simulate import sensor_gains_for_q_ripple, sensor_offsets_for_q_ripple
 from bldc_actuator.diagnosis.signals import Signals
 from bldc_actuator.kernel import measured_current_dq
 from bldc_actuator.model import Actuator

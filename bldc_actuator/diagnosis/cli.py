@@ -19,7 +19,7 @@ HELP = "locate where a recording and the model differ, name the missing physics,
 
 
 def register(subparsers) -> None:
-    from .candidates import EFFECT_NAMES
+    from .frame.candidates import EFFECT_NAMES
 
     p = subparsers.add_parser("diagnose", help=HELP, description=HELP + ". See docs and issue 4.",
                               formatter_class=argparse.RawDescriptionHelpFormatter,

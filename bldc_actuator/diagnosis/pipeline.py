@@ -1,24 +1,24 @@
 """``diagnose()``: locate where a recording and the model differ, name the missing physics, fit it,
 and show the fit improve on data it did not fit.
 
-The method in stages, each a module with one entry point and plain data between them
-(:mod:`.stages.data`); the caller has loaded (:func:`.io.loaders.load`) and cleaned (:func:`.io.cleaning.clean`) the
+The method in stages, each a package whose ``stage`` module is its one entry point, with plain data between them
+(:mod:`.records`), over the shared :mod:`.frame` (equation error, the effect library, window replay); the caller has loaded (:func:`.io.loaders.load`) and cleaned (:func:`.io.cleaning.clean`) the
 recording:
 
-* :mod:`.stages.search` — equation error: the recording in the model's frame, the nominal residuals and replay,
+* :mod:`.search.stage` — equation error: the recording in the model's frame, the nominal residuals and replay,
   where they sit (bins, change points, angle orders), forward selection with ΔBIC + held-out gate, the thermal
   network and voltage-limit searches.
-* :mod:`.stages.judge` — the simulator as judge: aliases decided by replay, practical significance and
+* :mod:`.judge.stage` — the simulator as judge: aliases decided by replay, practical significance and
   identifiability, each finding's held-out simulated error with and without it, thermal findings by full-length
   thermal simulation, the drive's voltage-limit mode.
-* :mod:`.stages.refit` — output-error refit (multiple shooting) and the updated parameter file.
-* :mod:`.stages.report` — findings, before/after, the :class:`.report.DiagnosisReport`.
+* :mod:`.fit.stage` — output-error refit (multiple shooting) and the updated parameter file.
+* :mod:`.report.stage` — findings, before/after, the :class:`.report.document.DiagnosisReport`.
 
 The route is chosen from the channels (:func:`route`): a log with torque and motion but no motor current goes
-to the torque balance (:mod:`.torque_balance`), reported by :func:`.stages.report.torque_balance` in the same
+to the torque balance (:mod:`.torque_balance`), reported by :func:`.report.stage.torque_balance` in the same
 :class:`DiagnosisReport` schema. The CLI and ``fleet`` both call :func:`diagnose`. Every report ends in one of
 three verdicts (:mod:`.results`: found / nothing missing / not decidable with the reasons of
-:mod:`.decidability`, including a structured residual outside the catalogue, :mod:`.residual_structure`).
+:mod:`.report.decidability`, including a structured residual outside the catalogue, :mod:`.report.residual_structure`).
 
 One progress line per step on stderr when ``options.progress``, numbered alike on both routes (``k/6``).
 
@@ -38,10 +38,13 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 from ..params import ActuatorParams
-from . import candidates as cands
-from .report import DiagnosisReport
-from .selection import GateConfig
-from .stages import judge, refit, report, search
+from .frame import candidates as cands
+from .report.document import DiagnosisReport
+from .frame.selection import GateConfig
+from .fit import stage as refit
+from .judge import stage as judge
+from .report import stage as report
+from .search import stage as search
 from .threads import SingleThreadedBLAS
 
 

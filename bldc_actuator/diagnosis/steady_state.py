@@ -29,7 +29,7 @@ import numpy as np
 from scipy import linalg
 
 from .. import effects
-from .candidates import FRAME_FACTORS, match_frame_factor
+from .frame.candidates import FRAME_FACTORS, match_frame_factor
 
 
 @dataclass

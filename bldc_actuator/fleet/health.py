@@ -23,9 +23,9 @@ resistance`` (K/W)             thermal_response``) output error,   changes by >=
 
 Estimator (well defined, the same for every recording):
 
-1. :func:`..diagnosis.equation_error.prepare` with the nominal parameters (same filter, decimation and
+1. :func:`..diagnosis.frame.equation_error.prepare` with the nominal parameters (same filter, decimation and
    held-out blocks as ``diagnose``).
-2. ONE joint least-squares fit (:func:`..diagnosis.selection.fit_model`: instrumental variables for
+2. ONE joint least-squares fit (:func:`..diagnosis.frame.selection.fit_model`: instrumental variables for
    current-proportional columns, fixed-point K_t column) of the four linear columns that are checkable
    plus the always-fitted nuisance columns, each equation weighted by 1/robust std of its nominal training
    residual. The joint fit keeps friction from absorbing a K_t change and vice versa.
@@ -103,8 +103,8 @@ def _rms(x) -> float:
 
 def track(signals, params: ActuatorParams, *, holdout: float = 0.3, ctx=None) -> list[Tracked]:
     """Fit the :data:`TRACKED` parameters on one cleaned recording (see the module docstring)."""
-    from ..diagnosis import candidates as cands
-    from ..diagnosis import equation_error as ee
+    from ..diagnosis.frame import candidates as cands
+    from ..diagnosis.frame import equation_error as ee
 
     if ctx is None:
         ctx = ee.prepare([(signals, False)], params, holdout=holdout)
@@ -146,7 +146,7 @@ def cluster_covariance(ctx, cols: dict, keys: list[str], weights: dict[str, floa
     cluster) and ``cov = G/(G-1) A (sum_g s_g s_g') A'`` with the cluster scores ``s_g = sum Z_i w^2 r_i``
     and ``A = (Z'W^2X)^-1`` (least squares: Z = X; instrumental variables: the instruments). Honest for
     any residual correlation shorter than a cluster; with few clusters it is itself uncertain (G dof)."""
-    from ..diagnosis.equation_error import integrated_autocorrelation_time
+    from ..diagnosis.frame.equation_error import integrated_autocorrelation_time
 
     ho = ctx.holdout_dec
     Xs, Zs, rs, idx = [], [], [], []
@@ -189,7 +189,7 @@ def cluster_covariance(ctx, cols: dict, keys: list[str], weights: dict[str, floa
 
 
 def _track_linear(ctx, params, cands, ee) -> list[Tracked]:
-    from ..diagnosis.selection import checkable, fit_model
+    from ..diagnosis.frame.selection import checkable, fit_model
 
     lib = cands.library()
     names = {e: p for p, (e, _, _) in TRACKED.items()}

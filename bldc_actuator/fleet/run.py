@@ -166,7 +166,7 @@ def _process_joint(job: Job, joint, mapping) -> tuple[list[dict], list[dict]]:
     if route(sig) == TORQUE_BALANCE:
         res = torque_balance.diagnose(sig, params, holdout=job.holdout)
         return _with_issues(_torque_balance_rows(base, res), serious), []
-    from ..diagnosis import equation_error as ee
+    from ..diagnosis.frame import equation_error as ee
 
     ctx = ee.prepare([(sig, False)], params, holdout=job.holdout)
     failures = []

@@ -28,8 +28,8 @@ from typing import Any, Callable
 import numpy as np
 from scipy import signal as sps
 
-from .. import effects, frames
-from ..params import ActuatorParams
+from ... import effects, frames
+from ...params import ActuatorParams
 
 EQUATIONS = ("mechanical", "electrical")
 UNITS = {"mechanical": "A (q current; torque / K)", "electrical": "V (q-axis)"}
@@ -232,7 +232,7 @@ class CommandReplay:
     recording, which its user rarely knows (issue #14, the gym-electric-motor benchmark): ``hold`` each logged
     command until the next sample (a joint controller running at the log rate), or interpolate it linearly over
     ``substeps`` steps per sample (a command updated faster than the log: a speed loop at the current loop's rate,
-    a log that keeps every 10th sample). Decided before any finding is judged (:func:`.refit.command_replay`):
+    a log that keeps every 10th sample). Decided before any finding is judged (:func:`.simulate.command_replay`):
     by the nominal model's replay of the TRAINING windows both ways (the smaller error), or by the log rate when
     there is nothing to replay."""
 
@@ -284,7 +284,7 @@ class Context:
     nuisance: dict[str, Callable] = field(default_factory=dict)   #: always-fitted, never-reported columns
     nuisance_reason: str = ""
     #: how the window replay applies the logged commands between samples; None: by the log rate alone
-    #: (:func:`.refit.replay_substeps`)
+    #: (:func:`.simulate.replay_substeps`)
     command_replay: CommandReplay | None = None
     #: drive settings identified from the recording before anything is judged (``drive.decoupling_enabled``,
     #: :func:`.drive_feedforward.identify`): every updated parameter set carries them
@@ -644,7 +644,7 @@ def thermal_response(ctx: Context, p: ActuatorParams, extra_heat: np.ndarray | N
     ``R(T_w)(i_d² + i_q²)`` (+ ``extra_heat`` [W]), per segment (state carried across segments; a second
     recording, e.g. a held-out file, starts again from its own first measured temperatures),
     evaluated every ``every`` raw samples and held in between. Returns raw-rate (T_w, T_h)."""
-    from .. import model
+    from ... import model
 
     th, m = p.thermal, p.motor
     S = ctx.sig
@@ -977,3 +977,20 @@ def heldout_comparison(ctx: Context, base: Fit, new: Fit, weights: dict[str, flo
     else:
         tstat = 0.0
     return {"available": True, "rel": rel, "t": tstat, "per_eq": per_eq, "chunks": int(len(sums))}
+
+
+def rms(x) -> float:
+    x = np.asarray(x, float)
+    x = x[np.isfinite(x)]
+    return float(np.sqrt(np.mean(x ** 2))) if len(x) else float("nan")
+
+
+def ee_metrics(ctx: Context, fit: Fit) -> dict[str, dict[str, float]]:
+    """Equation-error residual RMS per equation on training and held-out rows."""
+    ho = ctx.holdout_dec
+    out = {}
+    for eq, B in ctx.blocks.items():
+        r = fit.resid[eq]
+        out[eq] = {"train_rms": rms(r[B.rows(ho, "train")]), "holdout_rms": rms(r[B.rows(ho, "holdout")]),
+                   "unit": B.unit}
+    return out

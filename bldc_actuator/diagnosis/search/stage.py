@@ -1,11 +1,11 @@
 """Stage 3, search (equation error): where do recording and model differ, and which candidate terms explain it?
 
 :func:`run`: the recording into the model's frame (derivatives, parallel low-pass, decimation, held-out blocks:
-:func:`..equation_error.prepare`), the nominal model's equation-error residuals and its short-window replay, the
+:func:`..frame.equation_error.prepare`), the nominal model's equation-error residuals and its short-window replay, the
 residual located (speed / current / temperature / headroom bins, change points, angle orders), forward
-selection with ΔBIC + held-out gate (:func:`..selection.forward_select`), and the output-error searches of the
+selection with ΔBIC + held-out gate (:func:`..frame.selection.forward_select`), and the output-error searches of the
 thermal network and the drive's voltage limit. Nothing here decides acceptance in the simulator: that is
-:mod:`.judge`.
+:mod:`..judge.stage`.
 """
 
 from __future__ import annotations
@@ -16,30 +16,14 @@ import time
 import numpy as np
 
 from ...params import ActuatorParams
-from .. import candidates as cands
 from .. import drive_feedforward
-from .. import equation_error as ee
-from .. import locate as loc_mod
-from .. import refit
-from ..selection import forward_select
-from .data import Say, Search
-
-
-def rms(x) -> float:
-    x = np.asarray(x, float)
-    x = x[np.isfinite(x)]
-    return float(np.sqrt(np.mean(x ** 2))) if len(x) else float("nan")
-
-
-def ee_metrics(ctx: ee.Context, fit: ee.Fit) -> dict[str, dict[str, float]]:
-    """Equation-error residual RMS per equation on training and held-out rows."""
-    ho = ctx.holdout_dec
-    out = {}
-    for eq, B in ctx.blocks.items():
-        r = fit.resid[eq]
-        out[eq] = {"train_rms": rms(r[B.rows(ho, "train")]), "holdout_rms": rms(r[B.rows(ho, "holdout")]),
-                   "unit": B.unit}
-    return out
+from ..frame import candidates as cands
+from ..frame import equation_error as ee
+from ..frame import locate as loc_mod
+from ..frame import simulate as refit
+from ..frame.equation_error import ee_metrics, rms
+from ..frame.selection import forward_select
+from ..records import Say, Search
 
 
 def _issue_dict(issue) -> dict:

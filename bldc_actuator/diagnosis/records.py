@@ -1,15 +1,15 @@
-"""Plain data handed from one diagnosis stage to the next (see :mod:`bldc_actuator.diagnosis.stages`)."""
+"""Plain data handed from one diagnosis stage to the next (the stages of :mod:`bldc_actuator.diagnosis.pipeline`: search -> judge -> fit -> report)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-from ...params import ActuatorParams
-from ..equation_error import Context, Fit
-from ..refit import FinalFit
-from ..selection import SelectionResult
-from ..significance import Verdict
+from ..params import ActuatorParams
+from .frame.equation_error import Context, Fit
+from .frame.simulate import FinalFit
+from .frame.selection import SelectionResult
+from .significance import Verdict
 
 
 @dataclass

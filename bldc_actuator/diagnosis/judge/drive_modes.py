@@ -23,9 +23,9 @@ from typing import Any
 
 import numpy as np
 
-from ..kernel import VOLTAGE_LIMIT_MODES
-from ..params import ActuatorParams
-from . import refit
+from ...kernel import VOLTAGE_LIMIT_MODES
+from ...params import ActuatorParams
+from ..frame import simulate as refit
 
 #: a sample counts as "at the voltage limit" when the model's steady voltage demand |(R i + K ω) + j p ω L i|
 #: reaches this fraction of the circle (the PI's transient demand goes above it), or the recorded voltage does

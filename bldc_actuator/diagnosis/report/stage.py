@@ -1,6 +1,6 @@
 """Stage 6, report: one finding per accepted effect with its evidence and its held-out before/after in the
 metric that suits it, the final model's simulated before/after (short-window replay of the held-out windows,
-full-length thermal simulation), aliases, and the :class:`..report.DiagnosisReport` that renders JSON, markdown
+full-length thermal simulation), aliases, and the :class:`.document.DiagnosisReport` that renders JSON, markdown
 and plots. :func:`run` is the entry point; nothing is decided here.
 """
 
@@ -10,15 +10,15 @@ import time
 
 import numpy as np
 
-from .. import candidates as cands
-from .. import decidability, residual_structure
-from .. import locate as loc_mod
-from .. import refit
-from ..report import DiagnosisReport
+from ..frame import candidates as cands
+from . import decidability, residual_structure
+from ..frame import locate as loc_mod
+from ..frame import simulate as refit
+from ..frame.equation_error import ee_metrics, rms
+from .document import DiagnosisReport
 from ..results import Undecidable, decide
-from ..selection import fit_model
-from .data import Judgement, Model, Say, Search
-from .search import ee_metrics, rms
+from ..frame.selection import fit_model
+from ..records import Judgement, Model, Say, Search
 
 
 def not_checkable(s: Search) -> DiagnosisReport:

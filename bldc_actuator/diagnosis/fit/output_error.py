@@ -2,7 +2,7 @@
 parameters and the core parameters are fitted jointly so that the SIMULATED actuator — the kernel the node
 runs — reproduces the training windows, starting from the equation-error estimates.
 
-Every training window is simulated from its recorded state (:func:`.refit.simulate_windows`); the residual is
+Every training window is simulated from its recorded state (:func:`..frame.simulate.simulate_windows`); the residual is
 the speed, current and (when recorded) drive q-voltage errors, each over its RMS error under the equation-error
 parameters so that the channels weigh alike — the voltage is what pins the torque constant down: in speed and
 current alone K, J and the friction torques scale together. ``scipy.optimize.least_squares`` (trust
@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from ..params import SPECS, ActuatorParams
-from .refit import simulate_windows
+from ...params import SPECS, ActuatorParams
+from ..frame.simulate import simulate_windows
 
 #: the core parameters a short window of motion pins down: refitted only when a finding changed them (issue #14:
 #: refitted always, K_t was written +61 % with J x20 on a joint whose K_t finding had been rejected)

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..params import ActuatorParams
+from ...params import ActuatorParams
 
 
 def load_trajectory(theta: np.ndarray, omega: np.ndarray, t: np.ndarray, segments, p: ActuatorParams):
@@ -26,7 +26,7 @@ def load_trajectory(theta: np.ndarray, omega: np.ndarray, t: np.ndarray, segment
     backlash included); the rigid ``theta/N``, ``omega/N`` when ``p`` is rigid. Per segment, started seated
     (``theta/N - tau_L/k``, ``omega/N``), integrated by the kernel's :func:`~bldc_actuator.kernel.load_follow`
     (the simulator's own load equation with the rotor's motion given)."""
-    from .. import kernel
+    from ... import kernel
 
     g = p.gear
     N = g.gear_ratio

@@ -14,7 +14,7 @@
 
 from __future__ import annotations
 
-from .results import Undecidable
+from ..results import Undecidable
 
 BASE_REPLAY_MAX = 3.0          #: base replay error / recorded signal RMS above which nothing can be decided
 MIN_HOLDOUT_WINDOWS = 25       #: held-out replay windows below which the held-out gates are too weak

@@ -3,8 +3,8 @@
 :func:`run`: the judged equation-error values (already written into the parameter schema by the judge,
 ``Judgement.params_linear``), then the output-error refit — the accepted effects' simulator parameters and the
 core (K_t, J) fitted jointly by multiple shooting on the training windows, kept only when it simulates the
-held-out windows better (:func:`..output_error.refit`) — then the thermal, voltage-limit and drive-mode findings
-written into their fields, and the check whether several core values are far off (:func:`..base_model.check`).
+held-out windows better (:func:`.output_error.refit`) — then the thermal, voltage-limit and drive-mode findings
+written into their fields, and the check whether several core values are far off (:func:`.base_model.check`).
 """
 
 from __future__ import annotations
@@ -12,8 +12,9 @@ from __future__ import annotations
 import time
 
 from ...params import keep_controller_of
-from .. import base_model, output_error, refit
-from .data import Judgement, Model, Say, Search
+from . import base_model, output_error
+from ..frame import simulate as refit
+from ..records import Judgement, Model, Say, Search
 
 
 def run(s: Search, j: Judgement, options, say: Say) -> Model:

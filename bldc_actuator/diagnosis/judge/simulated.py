@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from . import refit
+from ..frame import simulate as refit
 
 #: the simulated channel in which each equation's effects show (voltage-side effects: the drive's q voltage,
 #: since the current loop hides them in the current; current when no voltage was recorded)

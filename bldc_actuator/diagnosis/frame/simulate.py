@@ -26,14 +26,14 @@ from typing import Any
 
 import numpy as np
 
-from .. import effects, frames
-from ..model import BatchActuator
-from ..params import SPECS, ActuatorParams, controller_motor, from_flat, keep_controller_of, outside_usual_range
+from ... import effects, frames
+from ...model import BatchActuator
+from ...params import SPECS, ActuatorParams, controller_motor, from_flat, keep_controller_of, outside_usual_range
 from .candidates import Candidate
 from .equation_error import CommandReplay, Context, Fit, thermal_response
 from .selection import SelectionResult, fit_model
 from .transmission import window_load_states
-from .significance import THERMAL_FIT_BOUND_LOG
+from ..significance import THERMAL_FIT_BOUND_LOG
 
 
 # -- final fit --------------------------------------------------------------------------------------
@@ -467,7 +467,7 @@ def mechanical_replay_params(p: ActuatorParams) -> ActuatorParams:
 def true_current(ctx: Context, p: ActuatorParams) -> tuple[np.ndarray, np.ndarray]:
     """The winding d/q current [A] behind the recorded (sensor) current under ``p``'s sensor offsets and gains
     (the sensor model inverted sample by sample; the recorded current when the sensors are ideal)."""
-    from .. import kernel
+    from ... import kernel
 
     S = ctx.sig
     i_d, i_q = np.asarray(S["i_d"], float), np.asarray(S["i_q"], float)
@@ -688,7 +688,7 @@ def window_start(plist: list[ActuatorParams], i_d_meas, i_q_meas, omega, theta, 
     phase currents near zero are uncertain in a low-passed current (41 of 180 differed from the true ones), but
     the kernel's Filippov clamp keeps such a phase at zero whichever sign it starts with: 0.043 A, against
     0.035 A started from the recording drive's own integrator."""
-    from .. import kernel
+    from ... import kernel
 
     n = len(plist)
     i_d = np.array(i_d_meas, float).copy()

@@ -24,8 +24,8 @@ from typing import Any
 
 import numpy as np
 
-from ..params import ActuatorParams, dump_yaml
-from .results import NOT_DECIDABLE, NOTHING_MISSING, Verdict, decide
+from ...params import ActuatorParams, dump_yaml
+from ..results import NOT_DECIDABLE, NOTHING_MISSING, Verdict, decide
 
 
 def _clean(x):
@@ -135,7 +135,7 @@ class DiagnosisReport:
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
         if plots and self._internals:
-            from .threads import SingleThreadedBLAS as _SingleThreadedBLAS
+            from ..threads import SingleThreadedBLAS as _SingleThreadedBLAS
 
             with _SingleThreadedBLAS():
                 images = _plots(self, directory)
@@ -337,7 +337,7 @@ def _plots(r: DiagnosisReport, d: Path) -> dict[str, str]:
 def _plot_jobs(r: DiagnosisReport, d: Path) -> list:
     import matplotlib.pyplot as plt
 
-    from . import locate as loc_mod
+    from ..frame import locate as loc_mod
 
     I = r._internals
     ctx, sel = I["ctx"], I["sel"]

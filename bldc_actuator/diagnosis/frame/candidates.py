@@ -21,7 +21,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .. import effects, frames, kernel
+from ... import effects, frames, kernel
 
 #: frame factors a torque-constant error is compared with (fitted K / nominal K): every ratio a K_t read in one
 #: frame and entered as another produces, drives on delta motors included (:func:`frames.torque_constant_frame_factors`)
@@ -819,7 +819,7 @@ def params_compliance(coef, cov, keys, variant, ctx):
     """The column's coefficient is the load inertia reflected to the rotor, ``J_l/N^2`` [kg m^2]; with the
     anti-resonance ``f_a`` (refined, in ``variant.hyper``) and damping ratio: ``J_l``, ``k = (2 pi f_a)^2 J_l``,
     ``c = 2 zeta (2 pi f_a) J_l`` (output side), and the rotor side's own inertia, the nominal one less ``J_l/N^2``
-    (written by :func:`bldc_actuator.diagnosis.refit.updated_params`, so an inertia finding composes with it)."""
+    (written by :func:`bldc_actuator.diagnosis.frame.simulate.updated_params`, so an inertia finding composes with it)."""
     N = ctx.params.gear.gear_ratio
     if variant.hyper.get("kind") == "encoders":     # two encoders: k, c and the load inertia fitted directly
         out = _params_compliance_encoders(coef, cov, keys, ctx)

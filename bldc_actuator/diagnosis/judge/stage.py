@@ -14,10 +14,13 @@ from __future__ import annotations
 
 import time
 
-from .. import drive_feedforward, drive_modes, judge, refit, significance
-from ..candidates import SPECIAL
-from ..selection import forward_select, unexcited_aliases
-from .data import Judgement, Say, Search
+from .. import drive_feedforward, significance
+from ..frame import simulate as refit
+from . import drive_modes
+from . import simulated as judge
+from ..frame.candidates import SPECIAL
+from ..frame.selection import forward_select, unexcited_aliases
+from ..records import Judgement, Say, Search
 
 #: simulated verdicts that keep a finding ("not simulated" does not: with the gate on, a finding the simulated
 #: actuator cannot hold — no term for its form, or a fitted value outside its parameter — cannot be shown to help)

@@ -1,0 +1,1 @@
+"""Stage: search (equation error). One entry point, :func:`.stage.run`."""
