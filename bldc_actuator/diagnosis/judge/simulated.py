@@ -150,7 +150,10 @@ def simulate_findings(ctx, sel, pars, lib, starts: list[int], window_s: float, z
             # viscous term 0.94 -> 2.97 rad/s in the closed loop, "confirmed" 3.19 -> 2.60 driven by the
             # measured current, with the drive's current reproduced to 0.2 % of its RMS)
             contradicted = check["close"] and (_worse(closed) or str(closed["verdict"]).startswith("worsens"))
-            if (not decided and check["ok"]) or (cd["verdict"] == "confirmed" and contradicted):
+            # blind: the noise drift is the replay's whole error, with and without the finding (e0 = e1 = 0)
+            blind = not any(cd["noise_corrected"].values())
+            if (not decided and (check["ok"] or (blind and check["ok_raw_noise"]))) \
+                    or (cd["verdict"] == "confirmed" and contradicted):
                 out[e] = dict(closed, measured_current_replay=_brief(cd))
             else:
                 out[e] = dict(cd, closed_loop_replay=_brief(closed))
@@ -298,8 +301,13 @@ def drive_check(ctx, full: dict[str, Any]) -> dict[str, Any]:
     ok = bool(math.isfinite(err) and (err <= DRIVE_CHECK_FRACTION * sig
                                       or (err <= DRIVE_CHECK_NOISE * noise and err <= DRIVE_CHECK_NOISE * left)))
     close = bool(math.isfinite(err) and math.isfinite(sig) and err <= DRIVE_CHECK_CLOSE * sig)
+    # the raw-noise rule alone: where the measured-current replay is blind (its noise drift is the whole error),
+    # the closed loop is the only judge left, and it is held to this weaker check (builtin kt_frame_10khz: a 10 kHz
+    # drive log, current 0.043 A RMS under 0.17 A of sensor noise, error 0.074 A: within the raw noise, not within
+    # the low-passed 0.025 A)
+    ok_raw = bool(math.isfinite(err) and (err <= DRIVE_CHECK_FRACTION * sig or err <= DRIVE_CHECK_NOISE * noise))
     return {"current_error_rms": err, "current_rms": sig, "current_noise": noise, "current_noise_lowpassed": left,
-            "ok": ok, "close": close}
+            "ok": ok, "ok_raw_noise": ok_raw, "close": close}
 
 
 def _why_not_simulated(p: dict[str, dict]) -> str:
