@@ -141,19 +141,7 @@ def simulate_findings(ctx, sel, pars, lib, starts: list[int], window_s: float, z
                                          noise_drift(ctx, p_without, window_s), noise_drift(ctx, full, window_s),
                                          z, len(starts), window_s,
                                          None if imposed else (res_cd[0].get("signal_rms") or {}).get(ch))
-            # the measured-current replay decides, unless it cannot resolve the finding (neither better nor
-            # worse beyond its noise floor, or its speed far off) and the emulated drive reproduces the current
-            decided = cd["verdict"] == "confirmed" or _worse(cd)
-            # ...and where the emulated drive reproduces the recorded current closely, a closed-loop replay that
-            # the finding makes worse beyond its floor refuses it too: the measured current's own errors (a
-            # sensor's, or the torque's timing) can favour a spurious term (builtin case r_thermal_30min: a
-            # viscous term 0.94 -> 2.97 rad/s in the closed loop, "confirmed" 3.19 -> 2.60 driven by the
-            # measured current, with the drive's current reproduced to 0.2 % of its RMS)
-            contradicted = check["close"] and (_worse(closed) or str(closed["verdict"]).startswith("worsens"))
-            # blind: the noise drift is the replay's whole error, with and without the finding (e0 = e1 = 0)
-            blind = not any(cd["noise_corrected"].values())
-            if (not decided and (check["ok"] or (blind and check["ok_raw_noise"]))) \
-                    or (cd["verdict"] == "confirmed" and contradicted):
+            if torque_side_replay(cd, closed, check) == REPLAY_CLOSED_LOOP:
                 out[e] = dict(closed, measured_current_replay=_brief(cd))
             else:
                 out[e] = dict(cd, closed_loop_replay=_brief(closed))
@@ -179,6 +167,29 @@ def _channel(lib, effect: str) -> str:
     """The simulated channel where ``effect`` shows first (velocity for torque-side effects)."""
     eqs = [q for q in lib[effect].equations if q in _CHANNEL]
     return _CHANNEL[eqs[0]] if eqs else "velocity"
+
+
+def torque_side_replay(cd: dict, closed: dict, check: dict) -> str:
+    """Which replay's verdict a torque-side finding gets (:data:`REPLAY_MEASURED_CURRENT` or
+    :data:`REPLAY_CLOSED_LOOP`), from the measured-current verdict ``cd``, the closed-loop one ``closed`` and the
+    :func:`drive_check` ``check``.
+
+    The measured-current replay decides, unless it cannot resolve the finding (neither better nor worse beyond
+    its noise floor, or its speed far off) and the emulated drive reproduces the current; where it is blind (its
+    noise drift is its whole error with and without the finding: e0 = e1 = 0) the closed loop judges under the
+    raw-noise drive check (builtin kt_frame_10khz: a 10 kHz drive log, 0.043 A RMS current under 0.17 A of noise).
+    And where the emulated drive reproduces the recorded current closely, a closed-loop replay that the finding
+    makes worse beyond its floor refuses it too: the measured current's own errors (a sensor's, or the torque's
+    timing) can favour a spurious term (builtin case r_thermal_30min: a viscous term 0.94 -> 2.97 rad/s in the
+    closed loop, "confirmed" 3.19 -> 2.60 driven by the measured current, the drive's current reproduced to 0.2 %
+    of its RMS)."""
+    decided = cd["verdict"] == "confirmed" or _worse(cd)
+    contradicted = check["close"] and (_worse(closed) or str(closed["verdict"]).startswith("worsens"))
+    blind = not any(cd["noise_corrected"].values())
+    if (not decided and (check["ok"] or (blind and check["ok_raw_noise"]))) \
+            or (cd["verdict"] == "confirmed" and contradicted):
+        return REPLAY_CLOSED_LOOP
+    return REPLAY_MEASURED_CURRENT
 
 
 def _worse(v: dict) -> bool:
