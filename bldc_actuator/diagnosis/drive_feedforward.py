@@ -41,24 +41,6 @@ MAX_WINDOWS = 60
 REPRODUCE_MAX = 0.5
 
 
-def _errors(ctx, param_sets: list[ActuatorParams], starts: list[int], window_s: float) -> list[dict[str, np.ndarray]]:
-    """Per parameter set: per-window RMS simulated error of the current and the speed."""
-    r = refit.simulate_windows(ctx, param_sets, starts, window_s)
-    nW = len(starts)
-    out = []
-    for j in range(len(param_sets)):
-        sl = slice(j * nW, (j + 1) * nW)
-        out.append({"current": np.sqrt(np.mean((r["sim_i"][:, sl] - r["meas_i"][:, sl]) ** 2, axis=0)),
-                    "velocity": np.sqrt(np.mean((r["sim_w"][:, sl] - r["meas_w"][:, sl]) ** 2, axis=0))})
-    return out
-
-
-def _thin(starts: list[int]) -> list[int]:
-    if len(starts) <= MAX_WINDOWS:
-        return list(starts)
-    return [starts[i] for i in np.linspace(0, len(starts) - 1, MAX_WINDOWS).round().astype(int)]
-
-
 def _label(on: bool) -> str:
     return "with feed-forward" if on else "without feed-forward"
 
@@ -76,7 +58,7 @@ def identify(ctx, params: ActuatorParams, starts_train: list[int], starts_holdou
                                      "command", "needs": ["current", "velocity|position", "current_command|"
                                                           "torque_command"]})
         return out
-    tr, ho = _thin(starts_train), _thin(starts_holdout)
+    tr, ho = refit.thin(starts_train, MAX_WINDOWS), refit.thin(starts_holdout, MAX_WINDOWS)
     if len(tr) < MIN_WINDOWS or len(ho) < MIN_WINDOWS:
         out["not_checkable"].append({"effect": EFFECT, "needs": [],
                                      "reason": f"too few windows to replay ({len(tr)} training, {len(ho)} held-out; "
@@ -85,7 +67,7 @@ def identify(ctx, params: ActuatorParams, starts_train: list[int], starts_holdou
     nominal = bool(params.drive.decoupling_enabled)
     flipped = not nominal
     sets = [params, params.replace(**{FIELD: flipped})]
-    e_tr = _errors(ctx, sets, tr, window_s)
+    e_tr = refit.window_errors(ctx, sets, tr, window_s)
     i_tr = [float(np.mean(e["current"])) for e in e_tr]
     sim: dict[str, Any] = {"training_windows": len(tr), "heldout_windows": len(ho), "window_s": window_s,
                            "nominal": nominal, "training_current_error": {_label(nominal): i_tr[0],
@@ -115,7 +97,7 @@ def identify(ctx, params: ActuatorParams, starts_train: list[int], starts_holdou
                                                f"{100 * w_tr / signal:.0f} % of the recorded {signal:.3g}): {train_txt}"})
         return out
     sim["candidate"] = flipped
-    e_ho = _errors(ctx, sets, ho, window_s)
+    e_ho = refit.window_errors(ctx, sets, ho, window_s)
     d_i = e_ho[0]["current"] - e_ho[1]["current"]
     imp, se = float(np.mean(d_i)), float(np.std(d_i, ddof=1) / math.sqrt(len(d_i)))
     before, after = float(np.mean(e_ho[0]["current"])), float(np.mean(e_ho[1]["current"]))

@@ -359,10 +359,33 @@ def windows(ctx: Context, length: float, max_windows: int, which: str) -> list[i
                 continue
             if all(ctx.valid[c][s:s + L + 1].all() for c in need):
                 starts.append(s)
-    if len(starts) > max_windows:
-        pick = np.linspace(0, len(starts) - 1, max_windows).round().astype(int)
-        starts = [starts[i] for i in pick]
-    return starts
+    return thin(starts, max_windows)
+
+
+def thin(starts: list[int], max_windows: int) -> list[int]:
+    """``starts`` evenly thinned to at most ``max_windows`` (first and last kept)."""
+    if len(starts) <= max_windows:
+        return list(starts)
+    return [starts[i] for i in np.linspace(0, len(starts) - 1, max_windows).round().astype(int)]
+
+
+def window_errors(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], length: float, *,
+                  current_d: bool = False) -> list[dict[str, np.ndarray]]:
+    """Per parameter set: per-window RMS closed-loop simulated error of the current and the speed (and, with
+    ``current_d`` where the recording has it, of the d current against its low-passed reading)."""
+    r = simulate_windows(ctx, param_sets, starts, length)
+    nW = len(starts)
+    have_d = current_d and "current_d" in ctx.have
+    meas_d = ctx.dec.lowpass(ctx.sig["i_d"])[r["idx"][:, :nW]] if have_d else None
+    out = []
+    for j in range(len(param_sets)):
+        sl = slice(j * nW, (j + 1) * nW)
+        e = {"current": np.sqrt(np.mean((r["sim_i"][:, sl] - r["meas_i"][:, sl]) ** 2, axis=0)),
+             "velocity": np.sqrt(np.mean((r["sim_w"][:, sl] - r["meas_w"][:, sl]) ** 2, axis=0))}
+        if have_d:
+            e["current_d"] = np.sqrt(np.mean((r["sim_id"][:, sl] - meas_d) ** 2, axis=0))
+        out.append(e)
+    return out
 
 
 def replay(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], length: float,

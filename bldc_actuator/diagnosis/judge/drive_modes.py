@@ -52,10 +52,8 @@ def _near_limit(ctx) -> np.ndarray:
 
 def _limit_windows(ctx, which: str, window_s: float, near: np.ndarray) -> list[int]:
     L = max(5, int(round(window_s * ctx.fs)))
-    starts = [s for s in refit.windows(ctx, window_s, 10 ** 9, which) if near[s:s + L + 1].any()]
-    if len(starts) > MAX_WINDOWS:
-        starts = [starts[i] for i in np.linspace(0, len(starts) - 1, MAX_WINDOWS).round().astype(int)]
-    return starts
+    return refit.thin([s for s in refit.windows(ctx, window_s, 10 ** 9, which) if near[s:s + L + 1].any()],
+                      MAX_WINDOWS)
 
 
 def _variants(params: ActuatorParams) -> dict[str, ActuatorParams]:
@@ -65,23 +63,6 @@ def _variants(params: ActuatorParams) -> dict[str, ActuatorParams]:
         if mode == "field_weakening" and params.drive.field_weakening_current_max <= 0.0:
             kw["drive.field_weakening_current_max"] = params.drive.current_limit
         out[mode] = params.replace(**kw)
-    return out
-
-
-def _errors(ctx, param_sets: list[ActuatorParams], starts: list[int], window_s: float) -> list[dict[str, np.ndarray]]:
-    """Per parameter set: per-window RMS simulated error of current, speed and (when recorded) d current."""
-    r = refit.simulate_windows(ctx, param_sets, starts, window_s)
-    nW = len(starts)
-    have_d = "current_d" in ctx.have
-    meas_d = ctx.dec.lowpass(ctx.sig["i_d"])[r["idx"][:, :nW]] if have_d else None
-    out = []
-    for j in range(len(param_sets)):
-        sl = slice(j * nW, (j + 1) * nW)
-        e = {"current": np.sqrt(np.mean((r["sim_i"][:, sl] - r["meas_i"][:, sl]) ** 2, axis=0)),
-             "velocity": np.sqrt(np.mean((r["sim_w"][:, sl] - r["meas_w"][:, sl]) ** 2, axis=0))}
-        if have_d:
-            e["current_d"] = np.sqrt(np.mean((r["sim_id"][:, sl] - meas_d) ** 2, axis=0))
-        out.append(e)
     return out
 
 
@@ -117,7 +98,7 @@ def identify(ctx, params: ActuatorParams, window_s: float, *, wanted: bool = Tru
     nominal = params.drive.voltage_limit_mode
     variants = _variants(params)
     modes = list(variants)
-    e_tr = dict(zip(modes, _errors(ctx, list(variants.values()), tr, window_s)))
+    e_tr = dict(zip(modes, refit.window_errors(ctx, list(variants.values()), tr, window_s, current_d=True)))
     scores = {m: _score(e_tr[m], e_tr[nominal]) for m in modes}
     best = min(modes, key=lambda m: scores[m])
     sim = {"training_windows": len(tr), "heldout_windows": len(ho), "window_s": window_s,
@@ -128,7 +109,7 @@ def identify(ctx, params: ActuatorParams, window_s: float, *, wanted: bool = Tru
                                 "reason": f"the nominal mode ({nominal}) simulates the windows at the limit best "
                                           f"(relative training error {', '.join(f'{m} {v:.3f}' for m, v in scores.items())})"})
         return out
-    e_ho = _errors(ctx, [variants[nominal], variants[best]], ho, window_s)
+    e_ho = refit.window_errors(ctx, [variants[nominal], variants[best]], ho, window_s, current_d=True)
     d_i = e_ho[0]["current"] - e_ho[1]["current"]
     d_w = e_ho[0]["velocity"] - e_ho[1]["velocity"]
     imp, se = float(np.mean(d_i)), float(np.std(d_i, ddof=1) / math.sqrt(len(d_i)))
