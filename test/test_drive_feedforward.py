@@ -152,3 +152,29 @@ def test_no_feed_forward_finding_when_the_file_is_right_about_a_drive_behind_cou
     assert rep.updated_params.drive.decoupling_enabled is False
     assert rep.updated_params.effects.coulomb_friction == pytest.approx(0.02, rel=0.02)
     assert any("second pass" in n and "as the file says" in n for n in d["notes"])
+
+
+def test_a_wrong_drive_neither_blocks_nor_distorts_the_torque_side_findings():
+    """K_t x1.15 and 0.02 N*m of Coulomb friction behind a drive without feed-forward, the file saying it has
+    one: both torque-side findings keep their values (judged first behind the file's drive, then again behind
+    the identified one), and every finding is confirmed by the closed-loop replay of the identified drive too."""
+    from test_issue14_judge import reference
+    from test_issue14_judge_helpers import closed_loop_recording
+
+    nominal = ActuatorParams().replace(**{"drive.current_loop_bandwidth": 500.0})
+    k = nominal.motor.torque_constant_q
+    truth = nominal.replace(**{"drive.decoupling_enabled": False, "effects.coulomb_friction": 0.02,
+                               "motor.torque_constant_q": 1.15 * k})
+    rep = diagnose(closed_loop_recording(truth, nominal, reference, duration=16.0, seed=1), nominal)
+    d = rep.to_dict()
+    assert {f["effect"] for f in d["findings"]} == {"coulomb_friction", "torque_constant_error",
+                                                    drive_feedforward.EFFECT}, d["verdict"]
+    up = rep.updated_params
+    assert up.drive.decoupling_enabled is False
+    assert up.effects.coulomb_friction == pytest.approx(0.02, rel=0.02)
+    assert up.motor.torque_constant_q == pytest.approx(1.15 * k, rel=0.02)
+    for e in ("coulomb_friction", "torque_constant_error"):
+        sim = rep.finding(e)["simulation"]
+        assert sim["verdict"] == "confirmed" and sim["closed_loop_replay"]["verdict"] == "confirmed", e
+    ho = d["compare"]["replay"]["holdout"]
+    assert ho["after"]["velocity_rms"] < 0.01 * ho["before"]["velocity_rms"]
