@@ -137,3 +137,60 @@ def test_an_undecided_candidate_makes_the_verdict_not_decidable():
     assert any("longer held-out" in r for r in v.remedies())
     assert decide(["coulomb_friction"], reasons).kind == FOUND
     assert "caveat" in decide(["coulomb_friction"], reasons).text()
+
+
+def _excursion(t: np.ndarray) -> np.ndarray:
+    """Speed-like excitation concentrated in 0.75 s of a 2 s record (third-party tp_viscous_torque_sensor, seed
+    3: 26-28 rad/s RMS in chunks 3-5 of 0.25 s, 3-7 rad/s elsewhere)."""
+    return np.where((t >= 0.75) & (t < 1.5), 1.0, 0.12) * (1.0 + 0.2 * np.sin(2 * np.pi * 1.3 * t))
+
+
+def test_correlation_time_of_an_ar1_residual():
+    """Integrated autocorrelation time dt (1 + a) / (1 - a) of an AR(1) record with coefficient a."""
+    rng = np.random.default_rng(11)
+    for tau_s in (0.002, 0.01, 0.05):
+        t = np.arange(int(20 * FS)) / FS
+        e = _noise(rng, len(t), 1.0, tau_s)
+        a = math.exp(-1.0 / (tau_s * FS))
+        assert selection.correlation_time(e, t) == pytest.approx((1 + a) / (1 - a) / FS, rel=0.3)
+    assert selection.chunk_seconds(2.0, 0.006) == pytest.approx(0.12)
+    assert selection.chunk_seconds(2.0, 0.05) == selection.CHUNK_MAX_S      # capped at the old fixed length
+    assert selection.chunk_seconds(60.0, 0.001) == pytest.approx(1.0)        # a long part keeps 60 chunks
+
+
+def test_an_effect_in_a_short_excursion_of_a_short_held_out_part_is_decided_by_chunks_of_its_residual():
+    """Issue #14, third-party tp_viscous_torque_sensor seed 3: viscous drag 20 x datasheet, held-out -51 % RMS,
+    t = 12.4, but 'not decidable: held-out too short' (2.8 effective chunks of 0.25 s: t > 24.8 needed) while the
+    residual's correlation time was 6 ms. Chunks of 20 correlation times: the same record is decided."""
+    rng = np.random.default_rng(5)
+    ctx, t = _ctx(2.0)
+    x = _excursion(t)
+    e = _noise(rng, len(t), 0.02, tau_s=0.002)
+    r0 = 0.04 * x + e
+    ho = selection.heldout_test(ctx, _fit(r0), _fit(r0 - 0.04 * x), {"mechanical": 1.0})
+    assert ho["correlation_time"] == pytest.approx(0.004, rel=0.3)
+    assert ho["chunk_s"] < 0.1 and ho["chunks"] > 20
+    assert ho["rel"] > 0.3
+    assert ho["effective_chunks"] > 6 and ho["t"] > ho["t_crit"]
+    # the same record in 0.25 s chunks (the old fixed length) had under 3 effective chunks: not decidable
+    s_k = np.bincount(np.floor(t / 0.25).astype(int), weights=(0.04 * x) ** 2)
+    assert s_k.sum() ** 2 / (s_k @ s_k) < 3.5
+
+
+@pytest.mark.parametrize("tau_s", [0.002, 0.04])
+def test_chunks_from_the_residual_keep_a_null_at_the_nominal_rate(tau_s):
+    """200 nulls on the short excursion record, with fast and slow noise colour: shorter chunks on fast noise
+    must not let noise pass."""
+    rng = np.random.default_rng(17)
+    ctx, t = _ctx(2.0)
+    x = _excursion(t)
+    above = passed = 0
+    for _ in range(200):
+        e_train = _noise(rng, len(t), 0.02, tau_s)
+        b_hat = float(x @ e_train) / float(x @ x)
+        e = _noise(rng, len(t), 0.02, tau_s)
+        ho = selection.heldout_test(ctx, _fit(e), _fit(e - b_hat * x), {"mechanical": 1.0})
+        above += ho["t"] > ho["t_crit"]
+        passed += ho["t"] > ho["t_crit"] and ho["rel"] > 0.02
+    assert passed == 0
+    assert above <= 2

@@ -46,10 +46,14 @@ def _label(on: bool) -> str:
 
 
 def identify(ctx, params: ActuatorParams, starts_train: list[int], starts_holdout: list[int], window_s: float, *,
-             z: float = 2.0, tolerance: float = 0.05) -> dict[str, Any]:
+             z: float = 2.0, tolerance: float = 0.05, findings: tuple[str, ...] = ()) -> dict[str, Any]:
     """``{"findings": [...], "rejected": [...], "not_checkable": [...], "simulation": {...} | None,
     "updated_fields": {...}}`` for the drive's feed-forward; ``params`` = the model the windows are replayed
-    with (the nominal one: decided before any finding is judged, like :func:`.refit.command_replay`)."""
+    with: the nominal one in the first pass (decided before any finding is judged, like
+    :func:`.refit.command_replay`), the nominal one with the accepted ``findings`` (their names, for the report)
+    in the second pass (:mod:`.judge.stage`: an unmodelled torque such as Coulomb friction drives the nominal
+    replay's speed away, and with it the back-EMF the two drives differ by). The flip is always tested against
+    ``params.drive.decoupling_enabled``."""
     out: dict[str, Any] = {"findings": [], "rejected": [], "not_checkable": [], "simulation": None,
                            "updated_fields": {}}
     if "i_q" not in ctx.sig or "omega" not in ctx.sig or not any(c in ctx.have for c in ("current_command",
@@ -71,9 +75,11 @@ def identify(ctx, params: ActuatorParams, starts_train: list[int], starts_holdou
     i_tr = [float(np.mean(e["current"])) for e in e_tr]
     sim: dict[str, Any] = {"training_windows": len(tr), "heldout_windows": len(ho), "window_s": window_s,
                            "nominal": nominal, "training_current_error": {_label(nominal): i_tr[0],
-                                                                          _label(flipped): i_tr[1]}}
+                                                                          _label(flipped): i_tr[1]},
+                           "model_findings": list(findings)}
     out["simulation"] = sim
-    train_txt = (f"{len(tr)} training windows replayed in closed loop: simulated current error "
+    model = f" with the accepted {', '.join(findings)} in the model" if findings else ""
+    train_txt = (f"{len(tr)} training windows replayed in closed loop{model}: simulated current error "
                  f"{_label(nominal)} (as the file says) {i_tr[0]:.3g} A, {_label(flipped)} {i_tr[1]:.3g} A RMS")
     if i_tr[1] >= i_tr[0]:
         sim["candidate"] = nominal
@@ -109,7 +115,8 @@ def identify(ctx, params: ActuatorParams, starts_train: list[int], starts_holdou
                 "velocity_without": w_before, "velocity_with": w_after, "verdict": verdict, "windows": len(ho)})
     reason = (f"held-out windows: simulated current error {before:.3g} -> {after:.3g} A RMS {_label(flipped)} "
               f"(noise floor {z * se:.2g} A, tolerance {100 * tolerance:.0f} %); speed {w_before:.3g} -> "
-              f"{w_after:.3g} rad/s (not a criterion: it carries the torque-side findings still to come)")
+              f"{w_after:.3g} rad/s (not a criterion" + (")" if findings else
+                                                           ": it carries the torque-side findings still to come)"))
     if not confirmed:
         out["rejected"].append({"effect": EFFECT, "form": f"{FIELD}: {str(flipped).lower()}", "verdict": verdict,
                                 "reason": f"{verdict}: {train_txt}; {reason}"})
@@ -131,7 +138,8 @@ def identify(ctx, params: ActuatorParams, starts_train: list[int], starts_holdou
                      "before": before, "after": after},
         "metrics": [{"metric": "simulated current error RMS on held-out windows (closed-loop replay)", "unit": "A",
                      "before": before, "after": after},
-                    {"metric": "simulated speed error RMS on held-out windows (closed-loop replay, nominal motor)",
+                    {"metric": "simulated speed error RMS on held-out windows (closed-loop replay, "
+                               + (f"nominal motor with {', '.join(findings)})" if findings else "nominal motor)"),
                      "unit": "rad/s", "before": w_before, "after": w_after}],
         "simulation": sim,
         "updated_fields": {FIELD: flipped},

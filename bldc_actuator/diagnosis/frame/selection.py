@@ -100,7 +100,8 @@ def heldout_test(ctx: Context, base: Fit, new: Fit, weights: dict[str, float], l
     residual on the predicted change: 1 = the training fit carries over, 0 = nothing of it is there). "The
     held-out error improves" is ``γ > 1/2``. Its standard error comes from the residual left after that
     regression, summed per chunk of contiguous time (cluster-robust: colour within a chunk is allowed, the
-    variance of an unexcited chunk is ~0 instead of inflating the spread), with the small-sample factor
+    variance of an unexcited chunk is ~0 instead of inflating the spread; chunks of :func:`chunk_seconds`, long
+    against that residual's correlation time), with the small-sample factor
     G/(G-1); the critical value is Student's t at the one-sided level of ``level_sigma`` normal sigmas with
     G_eff - 1 degrees of freedom, G_eff = (Σ_k S_k)² / Σ_k S_k² the number of chunks the effect actually
     excites (S_k = Σ δ² in chunk k; 3 sigma: t = 3.13 at 60 chunks, 4.53 at 8). Fewer than 4 (effective)
@@ -124,7 +125,10 @@ def heldout_test(ctx: Context, base: Fit, new: Fit, weights: dict[str, float], l
     delta = r0 - r1
     S = float(delta @ delta)
     dur = float(tt.max() - tt.min()) if len(tt) else 0.0
-    chunk = max(0.25, dur / 60.0)          # the chunks of heldout_comparison
+    gamma0 = float(delta @ r0) / S if S > 0 else 0.0
+    tau = max((correlation_time(r0_ - gamma0 * (r0_ - r1_), t_) for r0_, r1_, t_ in zip(r0s, r1s, ts)), default=0.0)
+    chunk = chunk_seconds(dur, tau)
+    ho["correlation_time"] = tau
     cid = np.floor((tt - tt.min()) / chunk).astype(int)
     _, inv = np.unique(cid, return_inverse=True)
     G = int(inv.max()) + 1 if len(inv) else 0
@@ -149,6 +153,43 @@ def heldout_test(ctx: Context, base: Fit, new: Fit, weights: dict[str, float], l
 
 
 MIN_EFFECTIVE_CHUNKS = 2.0   #: below it the held-out test has no degree of freedom
+
+#: a chunk of the held-out test spans at least this many integrated autocorrelation times of the residual it
+#: tests (neighbouring chunks then correlate by ~1/20: the cluster-robust variance holds) ...
+CHUNK_CORRELATION_TIMES = 20.0
+#: ... and at most this long [s] (the fixed length it had: a held-out part of 15 s or more keeps dur/60)
+CHUNK_MAX_S = 0.25
+
+
+def correlation_time(e: np.ndarray, t: np.ndarray) -> float:
+    """Integrated autocorrelation time [s] of the residual ``e`` sampled at the times ``t`` (sorted here):
+    ``dt (1 + 2 sum_k rho_k)`` over the lags before the autocorrelation first turns negative (the initial
+    positive sequence), at most a quarter of the samples."""
+    e = np.asarray(e, float)[np.argsort(t, kind="stable")]
+    n = len(e)
+    if n < 8:
+        return 0.0
+    dt = float(np.median(np.diff(np.sort(t))))
+    x = e - e.mean()
+    f = np.fft.rfft(x, 2 * n)
+    ac = np.fft.irfft(f * np.conj(f))[: n // 4]
+    if ac[0] <= 0:
+        return 0.0
+    rho = ac / ac[0]
+    neg = np.nonzero(rho < 0)[0]
+    k = int(neg[0]) if len(neg) else len(rho)
+    return dt * (1.0 + 2.0 * float(rho[1:k].sum()))
+
+
+def chunk_seconds(duration: float, tau: float) -> float:
+    """Length [s] of the held-out test's chunks: :data:`CHUNK_CORRELATION_TIMES` correlation times of the tested
+    residual, capped at :data:`CHUNK_MAX_S`, never below ``duration / 60`` (a long held-out part keeps 60 chunks).
+    A fixed 0.25 s left a 2 s held-out recording 8 chunks whatever its residual's colour: where its speed
+    excursion filled 0.75 s, a viscous drag (held-out -51 % RMS, t = 12.4, residual correlation time 6 ms) had
+    2.8 effective chunks and was 'not decidable' (third-party tp_viscous_torque_sensor, seed 3)."""
+    if not tau > 0:         # no estimate: the fixed length
+        return max(duration / 60.0, CHUNK_MAX_S)
+    return max(duration / 60.0, min(CHUNK_MAX_S, CHUNK_CORRELATION_TIMES * tau))
 
 
 def t_critical(chunks: float, level_sigma: float) -> float:
