@@ -17,6 +17,8 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def _fmt(x) -> str:
+    if isinstance(x, bool):             # a flag (the drive's decoupling_enabled)
+        return str(x).lower()
     if isinstance(x, str):
         return x
     return "–" if x is None else format(x, ".3g")

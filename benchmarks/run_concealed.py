@@ -41,20 +41,20 @@ GENERATOR_SOURCES = ("truth.py", "truth_kernel.c", "excitation.py", "cases.py", 
 
 
 def generator_hash(case_set: str = "builtin") -> str:
-    h = hashlib.sha256()
+    """The builtin set: one stamp of its generator's sources (every case regenerates when one changes). The
+    third-party sets: the stamp of their simulation module and library versions; each case's recordings carry
+    their own key on top of it (``case_kit.recording_key``: that code and the case's recording spec)."""
     if case_set == "thirdparty":
         from benchmarks.concealed import thirdparty
 
-        h.update((REPO / "benchmarks" / "concealed" / "thirdparty.py").read_bytes())
-        h.update(thirdparty.motulator_version().encode())
-    elif case_set == "gem":
+        return thirdparty.code_stamp()
+    if case_set == "gem":
         from benchmarks.concealed import gem_cases
 
-        h.update((REPO / "benchmarks" / "concealed" / "gem_cases.py").read_bytes())
-        h.update(gem_cases.gem_version().encode())
-    else:
-        for name in GENERATOR_SOURCES:
-            h.update((REPO / "benchmarks" / "concealed" / name).read_bytes())
+        return gem_cases.code_stamp()
+    h = hashlib.sha256()
+    for name in GENERATOR_SOURCES:
+        h.update((REPO / "benchmarks" / "concealed" / name).read_bytes())
     import numpy
 
     h.update(numpy.__version__.encode())
@@ -63,6 +63,25 @@ def generator_hash(case_set: str = "builtin") -> str:
 
 def ensure_data(cases, data_dir: Path, regenerate: bool, log, case_set: str = "builtin") -> dict[str, dict]:
     """Generate the cases whose files are missing or stale; return their truth dicts."""
+    if case_set in ("thirdparty", "gem"):
+        # per-case recording keys; the truth and nominal files are rewritten from the cases on every run
+        if case_set == "thirdparty":
+            from benchmarks.concealed import thirdparty as S
+        else:
+            from benchmarks.concealed import gem_cases as S
+        t0 = time.perf_counter()
+        truths, made = S.ensure(cases, data_dir, regenerate=regenerate, progress=lambda m: log("  " + m))
+        if made:
+            log(f"  generated {len(made)} case(s) in {time.perf_counter() - t0:.1f} s (wall); simulation time per "
+                f"case (training + held-out, summed over the workers):")
+            for name in made:
+                t = truths[name]
+                log(f"    {name:28s} {t.get('generation_seconds') or float('nan'):6.1f} s  "
+                    f"({t['train']['duration_s']:.0f} s + {t['heldout']['duration_s']:.0f} s recorded, "
+                    f"log {t['log'].get('rate', 1000.0):g} Hz)")
+        log(f"recordings in {data_dir}: {len(cases) - len(made)} cached, {len(made)} simulated (code "
+            f"{generator_hash(case_set)}); truth and nominal files rewritten from the case definitions")
+        return truths
     stamp = generator_hash(case_set)
     todo = []
     for case in cases:
@@ -74,23 +93,14 @@ def ensure_data(cases, data_dir: Path, regenerate: bool, log, case_set: str = "b
     if todo:
         log(f"generating {len(todo)} case(s) with the truth simulator -> {data_dir}")
         t0 = time.perf_counter()
-        if case_set == "thirdparty":
-            from benchmarks.concealed import thirdparty
-
-            made = thirdparty.generate(todo, data_dir, progress=lambda m: log("  " + m))
-        elif case_set == "gem":
-            from benchmarks.concealed import gem_cases
-
-            made = gem_cases.generate(todo, data_dir, progress=lambda m: log("  " + m))
-        else:
-            made = C.generate(todo, data_dir, progress=lambda m: log("  " + m))
+        made = C.generate(todo, data_dir, progress=lambda m: log("  " + m))
         for case in todo:
             (data_dir / case.name / ".generator").write_text(stamp)
         log(f"  generated in {time.perf_counter() - t0:.1f} s (wall); simulation time per case, summed over its "
             f"recordings (training, held-out, twins):")
         for case in todo:
             t = made[case.name]
-            log(f"    {case.name:28s} {t.get('generation_seconds', float('nan')):6.1f} s  "  # (builtin set only)
+            log(f"    {case.name:28s} {t.get('generation_seconds', float('nan')):6.1f} s  "
                 f"({t['train']['duration_s']:.0f} s + {t['heldout']['duration_s']:.0f} s recorded, "
                 f"log {t['log'].get('rate', 1000.0):g} Hz)")
     else:

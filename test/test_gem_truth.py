@@ -177,7 +177,8 @@ def test_interlocking_time_is_this_projects_dead_time():
 def test_our_kernel_with_the_true_parameters_reproduces_gem_and_the_drive():
     """Closed loop: the loaded resistance case's GEM run, replayed by this project's kernel from the drive's
     10 kHz current command — with the true R (and the drive tuned on the nominal one, drive.controller_*) it
-    follows GEM to 1e-3 rad/s; with the nominal file it does not (the hidden R changes the current loop)."""
+    follows GEM to 1e-3 rad/s; with the nominal file it does not (the hidden R changes the current loop), nor
+    with the true R and a drive without back-EMF feed-forward (the file's ``decoupling_enabled: true`` is right)."""
     case = G.get_case("gem_resistance_loaded")
     run = G.simulate(case, 0.4, seed=7)
     iq_ref = G.to_q(run["i_ref"]).imag
@@ -198,3 +199,8 @@ def test_our_kernel_with_the_true_parameters_reproduces_gem_and_the_drive():
     err_nominal = np.max(np.abs(replay(base) - run["w"]))
     assert err_true < 1e-3
     assert err_nominal > 20 * err_true
+    # the nominal file's drive is this drive: it says decoupling_enabled: true, and without the feed-forward the
+    # same true plant does not follow GEM + the drive
+    assert base["drive.decoupling_enabled"] is True
+    err_no_ff = np.max(np.abs(replay(dict(true, **{"drive.decoupling_enabled": False})) - run["w"]))
+    assert err_no_ff > 20 * err_true

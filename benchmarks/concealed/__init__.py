@@ -6,6 +6,9 @@
 * :mod:`.cases`      — the cases: which effect is hidden, its true size, the nominal parameter file the
                        user believes, training and held-out recordings; writes CSV + YAML + truth JSON.
 * :mod:`.scoring`    — compares a diagnosis JSON report with the truth JSON; tables (text, markdown, JSON).
+* :mod:`.thirdparty`, :mod:`.gem_cases` — cases whose truth is a peer simulator (motulator, gym-electric-motor);
+                       their recordings are made by :mod:`.thirdparty_sim` / :mod:`.gem_sim` and cached per case
+                       by :mod:`.case_kit` (the kit both sets share).
 
 Entry point: ``benchmarks/run_concealed.py``.
 """

@@ -18,31 +18,28 @@ power invariant: every current and voltage × √(3/2), ``K_q = √(3/2) p ψ_p`
 (both sides of ``u = R i + L di/dt`` scale alike); J = GEM's j_rotor + j_load; b = GEM's load ``b``; Coulomb
 friction = GEM's ``a``. ``test/test_gem_truth.py`` checks each conversion against GEM runs.
 
+The nominal file describes that drive as it is (``drive.decoupling_enabled: true``: it feeds the back-EMF and
+the cross-coupling forward with the nominal ψ and L; back-calculation anti-windup, proportional voltage limit on the
+SVPWM circle, one period of delay, 10 kHz PWM: the nominal file's drive fields). The recordings are made by
+:mod:`.gem_sim` from each case's :func:`recording_spec` and cached per case under that key (:mod:`.case_kit`); the
+truth and nominal files are written from the case definition on every run.
+
 Run in the peers venv (``bash benchmarks/peers/setup.sh``): ``benchmarks/run_concealed.py --set gem``.
 """
 
 from __future__ import annotations
 
-import csv
 import json
-import math
-from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
-SQRT3_2 = math.sqrt(1.5)
-T_S = 1.0e-4                 #: control period = GEM's step tau [s]; GEM's converter takes it as the PWM period too
-U_DC = 24.0                  #: [V] DC bus
-I_MAX_Q = 20.0               #: [A] |i_q| limit, power-invariant (the nominal file's drive.current_limit)
-ALPHA_C_HZ = 500.0           #: current-loop bandwidth [Hz] the drive's PI is tuned for
-SPEED_LOOP_HZ = 12.0         #: speed loop natural frequency [Hz] (PI, ζ = 1, nominal J)
-ENCODER_BITS = 14
-CURRENT_NOISE_Q = 0.03       #: [A] white noise on the logged d/q currents (power-invariant)
-VOLTAGE_NOISE_Q = 0.01       #: [V] on the logged d/q voltages
-VELOCITY_NOISE = 0.02        #: [rad/s]
+from . import case_kit as kit
+from . import gem_sim as sim
+from .gem_sim import (ALPHA_C_HZ, CURRENT_NOISE_Q, I_MAX_Q, SPEED_LOOP_HZ, SQRT3_2, T_S, U_DC,  # noqa: F401
+                      VOLTAGE_NOISE_Q, abc_duty, build_system, speed_reference, to_q, to_recording)
 
 #: the joint, in GEM's own parameter names and frames (amplitude-invariant ψ_p, peak flux linkage): the
 #: AK80-9-like motor of the other concealed sets, direct drive
@@ -75,7 +72,7 @@ def nominal_from_gem(motor: dict, load: dict, *, u_dc: float = U_DC, tau: float 
         "motor.resistance_temperature_enabled": False, "motor.magnet_temperature_enabled": False,
         "drive.bus_voltage": float(u_dc), "drive.current_limit": I_MAX_Q, "drive.current_loop_rate": 1.0 / tau,
         "drive.current_loop_bandwidth": ALPHA_C_HZ, "drive.current_loop_delay": tau,
-        "drive.pwm_frequency": 1.0 / tau, "gear.gear_ratio": 1.0,
+        "drive.pwm_frequency": 1.0 / tau, "drive.decoupling_enabled": True, "gear.gear_ratio": 1.0,
     }
     if load.get("a", 0.0):
         out["effects.coulomb_friction"] = float(load["a"])
@@ -138,23 +135,14 @@ CASES: tuple[GEMCase, ...] = (
 
 
 def get_case(name: str) -> GEMCase:
-    for c in CASES:
-        if c.name == name:
-            return c
-    raise KeyError(f"no GEM case {name!r} (have: {', '.join(c.name for c in CASES)})")
+    return kit.find_case(CASES, name, "GEM")
 
 
-def reseeded(case: GEMCase, offset: int) -> GEMCase:
-    """Fresh excitation and noise seeds (offset 0 = the published ones)."""
-    return case if not offset else replace(case, seed=case.seed + 1000 * offset)
+reseeded = kit.reseeded
 
 
 def nominal_params(case: GEMCase):
-    from bldc_actuator.params import from_flat
-
-    values = dict(NOMINAL_BASE)
-    values.update(case.nominal)
-    return from_flat(values)
+    return kit.nominal_params(NOMINAL_BASE, case)
 
 
 def truth_motor(case: GEMCase) -> dict:
@@ -169,181 +157,53 @@ def truth_load(case: GEMCase) -> dict:
     return {**GEM_LOAD, **case.load}
 
 
-# ------------------------------------------------------------------------------------------- excitation
+# ------------------------------------------------------------------------------------------- the recording spec
 
-def speed_reference(duration: float, seed: int) -> Callable[[float], float]:
-    """Speed reference [motor rad/s]: a slow triangle through zero (±6 rad/s, two periods) for 25 % of the
-    time, then a seeded multisine (five tones, random phases) that reverses often."""
-    rng = np.random.default_rng(seed)
-    f = np.array([0.3, 0.75, 1.7, 3.1, 5.3]) * rng.uniform(0.85, 1.15, 5)
-    a = np.array([20.0, 11.0, 6.0, 3.5, 1.5])
-    ph = rng.uniform(0, 2 * np.pi, 5)
-    t1 = 0.25 * duration
-    slow = 6.0
-
-    def w_ref(t: float) -> float:
-        if t < t1:
-            x = (t / t1) * 2.0
-            return slow * (1.0 - 4.0 * abs((x % 1.0) - 0.5)) * (1.0 if x < 1.0 else -1.0)
-        s = t - t1
-        ramp = min(1.0, s / 0.3)
-        return ramp * float(np.sum(a * np.sin(2 * np.pi * f * s + ph)))
-    return w_ref
-
-
-# ------------------------------------------------------------------------------------------- GEM plant
-
-def build_system(motor: dict, load: dict, *, tau_ext: float = 0.0, interlocking_time: float = 0.0,
-                 tau: float = T_S, u_dc: float = U_DC, control_space: str = "abc"):
-    """GEM's SCML system for one PMSM (its classes, its default solver); returns the physical system."""
-    import gym_electric_motor.physical_systems as ps
-
-    lim = dict(i=60.0, u=u_dc, omega=400.0, epsilon=math.pi, torque=0.0)
-    mot = ps.PermanentMagnetSynchronousMotor(motor_parameter=dict(motor), limit_values=dict(lim),
-                                             nominal_values=dict(lim))
-    if tau_ext:
-        class PolynomialStaticLoadWithConstantTorque(ps.PolynomialStaticLoad):
-            """GEM's polynomial load plus a constant torque (one-signed, a known external load)."""
-
-            def _static_load(self, omega):
-                return super()._static_load(omega) + tau_ext
-
-        load_cls = PolynomialStaticLoadWithConstantTorque
-    else:
-        load_cls = ps.PolynomialStaticLoad
-    mech = load_cls(load_parameter=dict(load), limits=dict(omega=400.0))
-    conv = ps.ContB6BridgeConverter(tau=tau, interlocking_time=interlocking_time)
-    return ps.SynchronousMotorSystem(converter=conv, motor=mot, load=mech,
-                                     supply=ps.IdealVoltageSupply(u_nominal=u_dc), ode_solver=ps.ScipyOdeSolver(),
-                                     tau=tau, control_space=control_space)
-
-
-def _index(system) -> dict:
-    return {n: k for k, n in enumerate(system.state_names)}
-
-
-def abc_duty(u_dq: complex, theta_e: float, u_dc: float) -> np.ndarray:
-    """Amplitude-invariant d-q voltage at electrical angle ``theta_e`` -> the three legs' normalised duty in GEM's
-    Cont-B6C action space [-1, 1] (leg voltage a·u_dc/2), with min-max zero-sequence injection (linear up to
-    |u| = u_dc/√3)."""
-    u_ab = u_dq * complex(math.cos(theta_e), math.sin(theta_e))
-    ua = u_ab.real
-    ub = -0.5 * u_ab.real + 0.5 * math.sqrt(3.0) * u_ab.imag
-    uc = -0.5 * u_ab.real - 0.5 * math.sqrt(3.0) * u_ab.imag
-    zs = 0.5 * (max(ua, ub, uc) + min(ua, ub, uc))
-    return np.clip(np.array([ua - zs, ub - zs, uc - zs]) / (0.5 * u_dc), -1.0, 1.0)
-
-
-def simulate(case: GEMCase, duration: float, seed: int) -> dict:
-    """One GEM run of ``case`` (truth plant) under the drive written here (nominal-parameter tuning); returns the
-    drive's samples at the control instants in GEM's frames (amplitude-invariant d-q, complex d + jq)."""
+def simulation_spec(case: GEMCase) -> dict:
+    """What GEM and the drive are given for ``case``: the truth plant in GEM's names and the drive's model of the
+    motor (the nominal one; a drive that knows the saliency has the true L_d, L_q)."""
     mt, ld = truth_motor(case), truth_load(case)
-    ps_ = build_system(mt, ld, tau_ext=case.tau_ext, interlocking_time=case.interlocking_time)
-    ix = _index(ps_)
-    lim = ps_.limits
-    # the drive's model of the motor: the nominal file (amplitude-invariant units, GEM's names)
     nom = dict(GEM_MOTOR)
     nom["l_d"] = nom["l_q"] = case.nominal.get("motor.q_inductance", GEM_MOTOR["l_q"])
     if case.drive_knows_saliency:
         nom["l_d"], nom["l_q"] = mt["l_d"], mt["l_q"]
-    p, psi, R = nom["p"], nom["psi_p"], nom["r_s"]
-    J_nom = case.nominal.get("motor.rotor_inertia", NOMINAL_BASE["motor.rotor_inertia"])   # the user's J
-    a_c = 2 * math.pi * ALPHA_C_HZ
-    kp_d, kp_q, ki = a_c * nom["l_d"], a_c * nom["l_q"], a_c * R
-    w_n = 2 * math.pi * SPEED_LOOP_HZ
-    kp_s, ki_s = 2.0 * w_n * J_nom, w_n * w_n * J_nom
-    k_tau = 1.5 * p * psi                          # torque per amplitude-invariant q-ampere (nominal)
-    i_max = I_MAX_Q / SQRT3_2
-    v_max = U_DC / math.sqrt(3.0)
-    w_ref = speed_reference(duration, seed)
-
-    n = int(round(duration / T_S)) + 1
-    out = {k: np.zeros(n) for k in ("t", "w", "w_ref", "theta_e", "torque", "tau_ext")}
-    out.update({k: np.zeros(n, dtype=complex) for k in ("i_ref", "i", "u_cmd", "u_gem")})
-    x = np.asarray(ps_.reset(), dtype=float) * lim
-    z = 0j                # current-PI integrator (d + jq)
-    zs = 0.0              # speed-PI integrator [N·m]
-    duty = np.zeros(3)    # the duty computed last period: applied during this one (computation delay)
-    theta_e = float(x[ix["epsilon"]])
-    eps_prev = theta_e
-    for k in range(n):
-        i = complex(x[ix["i_sd"]], x[ix["i_sq"]])
-        w = float(x[ix["omega"]])
-        eps = float(x[ix["epsilon"]])
-        theta_e += (eps - eps_prev + math.pi) % (2 * math.pi) - math.pi   # unwrap GEM's wrapped ε
-        eps_prev = eps
-        t = k * T_S
-        # speed loop -> q-current reference (amplitude-invariant), clamped with a clamped integrator
-        e_w = w_ref(t) - w
-        tau_ref = kp_s * e_w + zs
-        iq_ref = min(max(tau_ref / k_tau, -i_max), i_max)
-        if abs(tau_ref / k_tau) < i_max:
-            zs += ki_s * T_S * e_w
-        # current loop (d-q PI, decoupling + back-EMF feed-forward with the nominal model)
-        e = complex(0.0, iq_ref) - i
-        pw = p * w
-        v_ff = complex(-pw * nom["l_q"] * i.imag, pw * (nom["l_d"] * i.real + psi))
-        v_pi = complex(kp_d * e.real, kp_q * e.imag) + z + v_ff
-        mag = abs(v_pi)
-        v = v_pi * (v_max / mag) if mag > v_max else v_pi
-        z += ki * T_S * e + (v - v_pi)
-        out["t"][k], out["w"][k], out["w_ref"][k], out["theta_e"][k] = t, w, w_ref(t), theta_e
-        out["i_ref"][k], out["i"][k], out["u_cmd"][k] = complex(0.0, iq_ref), i, v
-        out["torque"][k] = float(x[ix["torque"]])
-        if k == n - 1:
-            break
-        # apply the previous period's duty now; this period's goes out at the next sample, at the angle then
-        x = np.asarray(ps_.simulate(duty), dtype=float) * lim
-        out["u_gem"][k] = complex(x[ix["u_sd"]], x[ix["u_sq"]])
-        out["tau_ext"][k] = case.tau_ext
-        duty = abc_duty(v, theta_e + pw * T_S, U_DC)
-    out["par"] = {"motor": mt, "load": ld, "tau_ext": case.tau_ext, "J": mt["j_rotor"] + ld["j_load"]}
-    return out
+    drive = {k: nom[k] for k in ("p", "r_s", "l_d", "l_q", "psi_p")}
+    drive["J"] = case.nominal.get("motor.rotor_inertia", NOMINAL_BASE["motor.rotor_inertia"])
+    return {"motor": mt, "load": ld, "tau_ext": float(case.tau_ext),
+            "interlocking_time": float(case.interlocking_time), "drive": drive}
 
 
-def to_q(x_amplitude_invariant):
-    """GEM's amplitude-invariant d-q -> this project's power-invariant d-q: × √(3/2)."""
-    from bldc_actuator import frames
-
-    return frames.dq_power_invariant_from_amplitude_invariant(np.asarray(x_amplitude_invariant))
-
-
-def to_recording(run: dict, *, rate: float, seed: int, noise: bool = True) -> dict:
-    """The drive's samples -> this project's recording (canonical channels, SI, motor side, power-invariant d-q),
-    logged at ``rate`` (every ``10 kHz / rate``-th control sample, no filter) with sensor noise from ``seed``."""
-    rng = np.random.default_rng(seed)
-    q = max(1, int(round(1.0 / (T_S * rate))))
-    idx = np.arange(0, len(run["t"]), q)
-    m = len(idx)
-    p = run["par"]["motor"]["p"]
-
-    def nz(scale):
-        return scale * rng.standard_normal(m) if noise else np.zeros(m)
-
-    i_ref, i_m, u = to_q(run["i_ref"][idx]), to_q(run["i"][idx]), to_q(run["u_cmd"][idx])
-    theta_m = run["theta_e"][idx] / p
-    res = 2 * np.pi / 2 ** ENCODER_BITS
-    return {
-        "time": run["t"][idx] - run["t"][0],
-        "current_command": i_ref.imag,
-        "current": i_m.imag + nz(CURRENT_NOISE_Q),
-        "current_d": i_m.real + nz(CURRENT_NOISE_Q),
-        "position": np.round(theta_m / res) * res if noise else theta_m,
-        "velocity": run["w"][idx] + nz(VELOCITY_NOISE),
-        "bus_voltage": np.full(m, U_DC),
-        "voltage_q": u.imag + nz(VOLTAGE_NOISE_Q),
-        "voltage_d": u.real + nz(VOLTAGE_NOISE_Q),
-        "true_omega": run["w"][idx],
-        "true_i_q": i_m.imag,
-    }
+def recording_spec(case: GEMCase) -> dict:
+    """Everything ``case``'s recordings depend on besides :mod:`.gem_sim`'s code and the library versions."""
+    return {"simulation": simulation_spec(case), "seeds": kit.seeds(case), "train_s": float(case.train_s),
+            "heldout_s": float(case.heldout_s), "log_rate": float(case.log_rate)}
 
 
-def hidden_term(case: GEMCase, run: dict, nominal) -> dict:
+def recording_key(case: GEMCase) -> str:
+    return kit.recording_key(recording_spec(case), sim, sim.LIBRARIES, (write_recordings,))
+
+
+def simulate(case: GEMCase, duration: float, seed: int) -> dict:
+    """One GEM run of ``case`` (truth plant, nominal-parameter drive): :func:`.gem_sim.simulate`."""
+    return sim.simulate(simulation_spec(case), duration, seed)
+
+
+def gem_version() -> str:
+    return kit.library_version("gym-electric-motor")
+
+
+def code_stamp() -> str:
+    return kit.code_stamp(sim, sim.LIBRARIES, (write_recordings,))
+
+
+# ------------------------------------------------------------------------------------------- truth
+
+def hidden_term(case: GEMCase, sig: dict, nominal) -> dict:
     """RMS of what the hidden effect adds, in the channel where it lives, next to the noise there: torque effects
-    in q-current units, voltage effects in volts."""
-    w, K = run["w"], nominal.motor.torque_constant_q
-    iq = to_q(run["i"]).imag
-    mt, ld = run["par"]["motor"], run["par"]["load"]
+    in q-current units, voltage effects in volts. ``sig``: the training run's clean signals."""
+    w, K = sig["w"], nominal.motor.torque_constant_q
+    iq = sig["i_q"]
+    mt, ld = truth_motor(case), truth_load(case)
     eff = np.zeros_like(w)
     if "b" in case.load:
         eff = (ld["b"] - nominal.motor.viscous_damping) * w / K
@@ -352,94 +212,64 @@ def hidden_term(case: GEMCase, run: dict, nominal) -> dict:
     elif case.interlocking_time:    # the mean d-q size of three legs' ±t_d/T·u_dc (power-invariant)
         eff = np.full_like(w, 1.5594 * case.interlocking_time / T_S * U_DC)
     elif "j_load" in case.load:
-        eff = (ld["j_load"] - GEM_LOAD["j_load"]) * np.gradient(w, run["t"]) / K
+        eff = (ld["j_load"] - GEM_LOAD["j_load"]) * np.gradient(w, sig["t"]) / K
     elif "psi_p" in case.motor:
         eff = (mt["psi_p"] / GEM_MOTOR["psi_p"] - 1.0) * K * w
     elif "r_s" in case.motor:
         eff = (mt["r_s"] - nominal.motor.phase_resistance) * iq
-    noise = CURRENT_NOISE_Q if case.channel == "current" else VOLTAGE_NOISE_Q
-    e = float(np.sqrt(np.mean(eff ** 2))) if not case.is_null else 0.0
-    out = {"channel": case.channel, "effect_rms": e, "noise_rms": noise, "snr": e / noise}
-    out["current"] = {"effect_rms": e if case.channel == "current" else 0.0, "noise_rms": CURRENT_NOISE_Q}
-    out["voltage_q"] = {"effect_rms": e if case.channel == "voltage_q" else 0.0, "noise_rms": VOLTAGE_NOISE_Q}
-    return out
+    return kit.concealment(case, float(np.sqrt(np.mean(eff ** 2))), CURRENT_NOISE_Q, VOLTAGE_NOISE_Q)
 
 
-# ------------------------------------------------------------------------------------------- writing
-
-COLUMNS = ("time", "current_command", "current", "current_d", "position", "velocity", "bus_voltage", "voltage_q",
-           "voltage_d")
-
-
-def write_csv(path: Path, rec: dict) -> None:
-    with path.open("w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(COLUMNS)
-        for i in range(len(rec["time"])):
-            w.writerow([f"{rec[c][i]:.7g}" if c != "time" else f"{rec[c][i]:.5f}" for c in COLUMNS])
+def write_recordings(case: GEMCase, runs: dict, d: Path) -> None:
+    s = kit.seeds(case)
+    for role in ("train", "heldout"):
+        kit.write_csv(d / f"{role}.csv", sim.to_recording(runs[role], rate=case.log_rate, seed=s[f"{role}_noise"]),
+                      sim.COLUMNS)
+    kit.save_train_truth(d / "train_truth.npz", **sim.true_signals(runs["train"]))
 
 
-def gem_version() -> str:
-    try:
-        from importlib.metadata import version
+def write_truth(case: GEMCase, d: Path) -> dict:
+    """``params.yaml`` and ``truth.json`` of ``case`` from its definition and the stored clean training signals."""
+    from bldc_actuator.params import dump_yaml
 
-        return version("gym-electric-motor")
-    except Exception:   # noqa: BLE001
-        return "not installed"
+    nominal = nominal_params(case)
+    dump_yaml(nominal, d / "params.yaml", header=f"GEM concealed case {case.name}: the NOMINAL model")
+    sig = kit.load_train_truth(d / "train_truth.npz")
+    s = kit.seeds(case)
+    truth = {
+        "case": case.name, "effects": list(case.effects), "story": case.story, "truth": case.truth,
+        "alias_ok": {k: list(v) for k, v in case.alias_ok.items()},
+        "source": f"gym-electric-motor {gem_version()} (SynchronousMotorSystem: PermanentMagnetSynchronousMotor, "
+                  "ContB6BridgeConverter, PolynomialStaticLoad, IdealVoltageSupply, ScipyOdeSolver); drive: PI "
+                  "current (decoupling and back-EMF feed-forward) + PI speed control written outside GEM",
+        "gem_motor": truth_motor(case), "gem_load": truth_load(case), "tau_ext": case.tau_ext,
+        "interlocking_time": case.interlocking_time, "nominal_overrides": case.nominal,
+        "concealment": hidden_term(case, sig, nominal), "oracle": None,
+        "recording_key": (d / kit.STAMP).read_text().strip(), "generation_seconds": kit.generation_seconds(d),
+        "train": {"excitation": "speed: triangle + multisine", "duration_s": case.train_s, "seed": s["train"]},
+        "heldout": {"excitation": "speed: triangle + multisine", "duration_s": case.heldout_s, "seed": s["heldout"]},
+        "log": {"rate": case.log_rate, "filter": "sample", "torque_sensor": False},
+        "ranges": {"max_abs_velocity_motor_rad_s": float(np.max(np.abs(sig["w"]))),
+                   "max_abs_current_A": float(np.max(np.abs(sig["i_q"])))},
+    }
+    (d / "truth.json").write_text(json.dumps(truth, indent=2, default=float) + "\n")
+    return truth
 
 
 def _job(args):
-    import time
-
     case, role, duration, seed = args
-    t0 = time.perf_counter()
-    run = simulate(case, duration, seed)
-    return case.name, role, run, time.perf_counter() - t0
+    return sim.job((case.name, simulation_spec(case), role, duration, seed))
+
+
+def ensure(cases, outdir: Path, *, regenerate: bool = False, progress: Callable[[str], None] | None = None,
+           workers: int = 2) -> tuple[dict, list[str]]:
+    """Simulate the cases whose recordings are missing or stale (:func:`recording_key`), rewrite every case's
+    nominal and truth files; ``({name: truth}, [names simulated])``."""
+    return kit.ensure(cases, outdir, key=recording_key, simulate_job=_job, write_recordings=write_recordings,
+                      write_truth=write_truth, label="GEM", regenerate=regenerate, progress=progress,
+                      workers=workers)
 
 
 def generate(cases, outdir: Path, *, progress: Callable[[str], None] | None = None, workers: int = 2) -> dict:
-    """Simulate each case's training and held-out runs with GEM and write the files (same layout as
-    :func:`cases.generate`: train.csv, heldout.csv, params.yaml, truth.json)."""
-    import time
-
-    from bldc_actuator.params import dump_yaml
-
-    outdir = Path(outdir)
-    jobs = []
-    for c in cases:
-        jobs += [(c, "train", c.train_s, 1000 * c.seed + 1), (c, "heldout", c.heldout_s, 1000 * c.seed + 2)]
-    runs, secs, t0 = {}, {}, time.perf_counter()
-    with ProcessPoolExecutor(max_workers=workers) as ex:
-        for k, (name, role, run, dt) in enumerate(ex.map(_job, jobs), start=1):
-            runs[(name, role)] = run
-            secs[name] = secs.get(name, 0.0) + dt
-            if progress:
-                progress(f"simulated {k}/{len(jobs)} recordings with GEM ({time.perf_counter() - t0:.0f} s)")
-    truths = {}
-    for c in cases:
-        d = outdir / c.name
-        d.mkdir(parents=True, exist_ok=True)
-        nominal = nominal_params(c)
-        for role, sd in (("train", 1000 * c.seed + 11), ("heldout", 1000 * c.seed + 12)):
-            write_csv(d / f"{role}.csv", to_recording(runs[(c.name, role)], rate=c.log_rate, seed=sd))
-        dump_yaml(nominal, d / "params.yaml", header=f"GEM concealed case {c.name}: the NOMINAL model")
-        tr = runs[(c.name, "train")]
-        truth = {
-            "case": c.name, "effects": list(c.effects), "story": c.story, "truth": c.truth,
-            "alias_ok": {k: list(v) for k, v in c.alias_ok.items()},
-            "source": f"gym-electric-motor {gem_version()} (SynchronousMotorSystem: PermanentMagnetSynchronousMotor, "
-                      "ContB6BridgeConverter, PolynomialStaticLoad, IdealVoltageSupply, ScipyOdeSolver); drive: PI "
-                      "current + PI speed control written outside GEM",
-            "gem_motor": truth_motor(c), "gem_load": truth_load(c), "tau_ext": c.tau_ext,
-            "interlocking_time": c.interlocking_time, "nominal_overrides": c.nominal,
-            "concealment": hidden_term(c, tr, nominal), "oracle": None, "generation_seconds": secs[c.name],
-            "train": {"excitation": "speed: triangle + multisine", "duration_s": c.train_s, "seed": 1000 * c.seed + 1},
-            "heldout": {"excitation": "speed: triangle + multisine", "duration_s": c.heldout_s,
-                        "seed": 1000 * c.seed + 2},
-            "log": {"rate": c.log_rate, "filter": "sample", "torque_sensor": False},
-            "ranges": {"max_abs_velocity_motor_rad_s": float(np.max(np.abs(tr["w"]))),
-                       "max_abs_current_A": float(np.max(np.abs(to_q(tr["i"]).imag)))},
-        }
-        (d / "truth.json").write_text(json.dumps(truth, indent=2, default=float) + "\n")
-        truths[c.name] = truth
-    return truths
+    """Simulate every case of ``cases`` and write its files; ``{name: truth}``."""
+    return ensure(cases, outdir, regenerate=True, progress=progress, workers=workers)[0]

@@ -60,6 +60,19 @@ def _get_str(params: dict, *names: str) -> str | None:
     return None
 
 
+def _get_bool(params: dict, *names: str) -> bool | None:
+    """A flag (the drive's ``decoupling_enabled``): the first key equal to (or ending with ``.``) one of ``names``
+    whose value is a bool (or a dict holding one under value / estimate)."""
+    for name in names:
+        for key, val in params.items():
+            if key == name or key.endswith("." + name):
+                if isinstance(val, dict):
+                    val = next((val[k] for k in ("value", "estimate") if isinstance(val.get(k), bool)), None)
+                if isinstance(val, bool):
+                    return val
+    return None
+
+
 def _get_list(params: dict, *names: str) -> list | None:
     for name in names:
         for key, val in params.items():
@@ -147,6 +160,8 @@ EXTRACTORS = {
     "voltage_limit_ratio": _voltage_ratio,
     "voltage_limit_mode": lambda p, n: _get_str(p, "voltage_limit_mode", "drive.voltage_limit_mode", "mode"),
     "housing_to_ambient_resistance": lambda p, n: _get(p, "housing_to_ambient_resistance", "R_ha"),
+    # the drive-side finding drive_decoupling (diagnosis/drive_feedforward.py): the flag it writes back
+    "decoupling_enabled": lambda p, n: _get_bool(p, "decoupling_enabled", "drive.decoupling_enabled"),
 }
 
 
@@ -157,8 +172,9 @@ class EffectScore:
     effect: str
     found: bool
     parameter: str
-    true_value: float | str             #: a string for a categorical parameter (the drive's voltage-limit mode)
-    estimate: float | str | None = None
+    #: a string or a flag for a categorical parameter (the drive's voltage-limit mode, its decoupling flag)
+    true_value: float | str | bool
+    estimate: float | str | bool | None = None
     rel_error: float | None = None      #: numeric parameters only
     #: categorical parameters (a mode, a name): estimate == truth; None for numeric ones or when not estimated
     value_correct: bool | None = None
@@ -251,14 +267,16 @@ def score_case(truth: dict, report: dict | None, nominal_flat: dict, *, wall_tim
     for effect in hidden:
         params_true = truth["truth"][effect]
         main, true_value = next(iter(params_true.items()))
-        categorical = isinstance(true_value, str)        # e.g. the drive's voltage-limit mode: exact or wrong
+        # e.g. the drive's voltage-limit mode or its feed-forward flag: exact or wrong
+        categorical = isinstance(true_value, (str, bool))
         es = EffectScore(effect, effect in names, main, true_value if categorical else float(true_value))
         f = next((f for f in findings if f["effect"] == effect), None)
         if f is not None:
-            default = (lambda p, n: _get_str(p, main)) if categorical else (lambda p, n: _get(p, main))
+            default = ((lambda p, n: _get_bool(p, main)) if isinstance(true_value, bool) else
+                       (lambda p, n: _get_str(p, main)) if categorical else (lambda p, n: _get(p, main)))
             est = EXTRACTORS.get(main, default)(f.get("parameters") or {}, nominal_flat)
-            if categorical and not isinstance(est, str):
-                est = None                    # a number where a mode was expected: not an estimate of it
+            if categorical and type(est) is not type(true_value):
+                est = None                    # a number where a mode or a flag was expected: not an estimate of it
             if est is not None:
                 es.estimate = est
                 if categorical:               # exact or wrong; no relative error (it would enter the means)
@@ -350,6 +368,8 @@ def summarise(scores: list[CaseScore]) -> dict:
 def _fmt(x, spec=".3g", none="–"):
     if x is None:
         return none
+    if isinstance(x, bool):     # a flag (the drive's decoupling_enabled)
+        return str(x).lower()
     if isinstance(x, str):      # a categorical value (the drive's voltage-limit mode)
         return x
     return format(x, spec)

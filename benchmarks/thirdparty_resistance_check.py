@@ -1,0 +1,82 @@
+#!/usr/bin/env python3
+"""Is the third-party set's ``tp_resistance`` (R × 1.4 with no load, ~0.08 A RMS of q current) fair?
+
+A perfect-knowledge estimator: every parameter but R true (the nominal file's K, L, p; L_d = L_q), the q-axis
+voltage equation ``v_q = R i_q + L di_q/dt + p ω L i_d + K ω`` on the LOGGED 1 kHz training channels, R by
+least squares with the current command as instrument (the logged current's noise is in the regressor), its
+standard error from the residual. Printed for the case and for ``tp_null`` (true R 0.13 Ω: what the same fit gives
+there is the model's own error on a 1 kHz log of a 10 kHz drive), with the speed taken from the drive's logged
+speed (its observer's estimate) or from the encoder angle (central difference), and the other channels delayed
+against the logged voltage by 0-1.5 control periods (the drive applies a voltage one period after computing it,
+with 1.5 periods of angle compensation).
+
+    .venv-peers/bin/python benchmarks/thirdparty_resistance_check.py [CACHE_DIR ...]
+    (default: benchmarks/.cache/thirdparty; the recordings of --set thirdparty)
+"""
+
+from __future__ import annotations
+
+import csv
+import sys
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from benchmarks.concealed import thirdparty as T  # noqa: E402
+
+
+def load(path: Path) -> dict[str, np.ndarray]:
+    with path.open() as fh:
+        rows = csv.reader(fh)
+        head = next(rows)
+        a = np.array([[float(x) for x in row] for row in rows])
+    return {h: a[:, k] for k, h in enumerate(head)}
+
+
+def fit_resistance(d: dict, K: float, L: float, p: int, *, speed: str = "encoder", delay_s: float = 0.0,
+                   trim: int = 50) -> tuple[float, float]:
+    """R [Ω] and its standard error from the logged channels, every other term of the q-axis equation true."""
+    t = d["time"]
+    dt = float(t[1] - t[0])
+    w = np.gradient(d["position"], t) if speed == "encoder" else d["velocity"]
+    k = np.arange(len(t), dtype=float)
+
+    def later(x):                                   # the channel at t + delay_s (linear interpolation)
+        return np.interp(k + delay_s / dt, k, x)
+
+    i_q, i_d, w = later(d["current"]), later(d["current_d"]), later(w)
+    r = d["voltage_q"] - (L * np.gradient(i_q, dt) + p * w * L * i_d + K * w)
+    z = later(d["current_command"])
+    s = slice(trim, len(t) - trim)
+    R = float(np.sum(z[s] * r[s]) / np.sum(z[s] * i_q[s]))
+    e = r[s] - R * i_q[s]
+    se = float(np.std(e) * np.sqrt(np.sum(z[s] ** 2)) / abs(np.sum(z[s] * i_q[s])))
+    return R, se
+
+
+def main(argv: list[str]) -> int:
+    dirs = [Path(a) for a in argv] or [REPO / "benchmarks" / ".cache" / "thirdparty"]
+    nom = T.nominal_params(T.get_case("tp_null"))
+    K, L, p = nom.motor.torque_constant_q, nom.motor.q_inductance, nom.motor.pole_pairs
+    delays = (0.0, 1.0e-4, 1.5e-4)
+    print(f"{'recordings':22s} {'case':14s} {'true R':>7s} {'speed':8s} "
+          + "  ".join(f"R at {1e6 * x:3.0f} µs delay" for x in delays))
+    for base in dirs:
+        for name in ("tp_resistance", "tp_null"):
+            path = base / name / "train.csv"
+            if not path.exists():
+                continue
+            d = load(path)
+            true_R = T.simulation_spec(T.get_case(name))["plant"]["R_s"]
+            for speed in ("logged", "encoder"):
+                cells = [fit_resistance(d, K, L, p, speed=speed, delay_s=x) for x in delays]
+                print(f"{base.name:22s} {name:14s} {true_R:7.3f} {speed:8s} "
+                      + "  ".join(f"{R:.4f} ± {se:.4f}     " for R, se in cells))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
