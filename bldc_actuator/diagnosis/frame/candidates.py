@@ -68,6 +68,9 @@ class Candidate:
     variants: Callable = None                     #: (ctx, locate) -> list[Variant]
     excited: Callable = None                      #: (ctx) -> None | reason it is not identifiable here
     to_params: Callable = None                    #: (coef, cov, keys, variant, ctx) -> Finding parameters
+    #: a candidate that is never fitted on its own but may hide behind these accepted effects (checked as an
+    #: alias only for them, :func:`..selection.unexcited_aliases`); None: behind any effect sharing an equation
+    hides_behind: tuple[str, ...] | None = None
 
 
 def _smooth_sign(x, eps):
@@ -359,6 +362,25 @@ def excite_compliance(ctx):
     share = float(np.var(fast) / np.var(a))
     return None if share > 0.01 else (f"needs motion with content above {COMPLIANCE_MIN_HZ:g} Hz (the acceleration "
                                       f"holds {100 * share:.2g} % of its variance there)")
+
+
+#: what separates a backlash from a softer spring when only the rotor's angle is recorded
+BACKLASH_EXPERIMENT = ("record the load's angle behind the transmission (a load-side encoder, column load_position: "
+                       "the dead zone shows on the measured deflection), or reverse the load at low torque (a slow "
+                       "reversal of the transmission torque: inside the dead zone the rotor runs free of the load, "
+                       "behind a spring it does not)")
+
+
+def excite_backlash(ctx):
+    """Never fitted on its own. With a load encoder the backlash is a form of transmission_compliance (the dead zone
+    on the measured deflection); from the rotor's angle alone a dead zone behind a stiffer spring moves the rotor
+    like a softer spring (the load follows through the spring's mean stiffness), so it is not checkable and is
+    reported as the compliance finding's alias (:func:`v_backlash`)."""
+    if "theta_load" in ctx.sig:
+        return ("with the load encoder (load_position) it is identified as a form of transmission_compliance "
+                "(the dead zone on the measured deflection)")
+    return ("needs the load's angle (a load-side encoder, load_position) or a load reversal at low torque: from the "
+            "rotor's angle alone a dead zone behind a spring moves the rotor like a softer spring")
 
 
 def excite_dead_time(ctx):
@@ -666,6 +688,24 @@ def v_compliance(ctx, loc):
                            nonlinear={"f_a": (f, max(lo, f / 1.15), min(hi, f * 1.15),
                                               lambda c, v, key=key, zeta=zeta: {key: col_compliance(v, zeta)})}))
     return out
+
+
+def v_backlash(ctx, loc):
+    """The forms a backlash takes seen from the rotor alone: the compliance forms themselves (the load follows a
+    dead zone behind a stiffer spring through its mean stiffness: the same column at the softer spring's
+    anti-resonance), so the alias with an accepted compliance is exact; none with a load encoder (there the dead
+    zone is fitted on the measured deflection, a form of transmission_compliance)."""
+    if "theta_load" in ctx.sig:
+        return []
+    return [Variant("backlash", f"a dead zone behind a stiffer spring, seen from the rotor alone ({v.label})",
+                    v.columns, hyper=dict(v.hyper, kind="rotor"))
+            for v in v_compliance(ctx, loc)]
+
+
+def params_backlash(coef, cov, keys, variant, ctx):
+    """Not identifiable from the rotor alone (the dead zone's width trades against the spring's stiffness): no
+    values, the alias says which experiment separates them."""
+    return {}
 
 
 def v_eripple(ctx, loc):
@@ -1004,6 +1044,11 @@ def library() -> dict[str, Candidate]:
                    "acceleration at every frequency, a compliance only above the anti-resonance",
                    "current_loop_delay": "a load encoder (joint side) measures the deflection directly"},
                   v_compliance, excite_compliance, params_compliance))
+    add(Candidate("backlash", ("mechanical",), mech_needs,
+                  "backlash: a dead zone in the transmission (gear play) behind its spring; identified with a load "
+                  "encoder (a form of transmission_compliance), an alias of the compliance from the rotor alone",
+                  True, {"transmission_compliance": BACKLASH_EXPERIMENT},
+                  v_backlash, excite_backlash, params_backlash, hides_behind=("transmission_compliance",)))
     add(Candidate("resistance_error", ("electrical",), ("voltage_q", "current", "velocity|position"),
                   "the winding resistance is off (at the reference temperature)", True,
                   {"resistance_temperature": "hold a current while the winding warms, with winding temperature "
