@@ -357,6 +357,12 @@ class Context:
         """Instrument of a column built from the measured current (see :func:`_regressor_current`)."""
         return self._inst_cache.get(key)
 
+    def memo(self, key, make: Callable[[], Any]) -> Any:
+        """``make()`` once per context and ``key`` (derived quantities a search reuses across its grid)."""
+        if key not in self._cross_cache:
+            self._cross_cache[key] = make()
+        return self._cross_cache[key]
+
     def cross(self, key) -> dict[str, float] | None:
         """Expected ``sum over an equation's training rows of column x residual`` for a column correlated with the
         residual's noise by construction (the loop-fed current-sensor noise in the acceleration: :mod:`.loop_noise`),

@@ -40,12 +40,14 @@ def sensitivity(p: ActuatorParams, f) -> np.ndarray:
     R_c, L_c, _ = controller_motor(p)
     T = 1.0 / d.current_loop_rate
     w_c = 2.0 * math.pi * d.current_loop_bandwidth
-    z = np.exp(2j * math.pi * np.asarray(f, float) * T)
+    f = np.asarray(f, float)
+    z = np.exp(2j * math.pi * f * T)
     a = math.exp(-R * T / L)
     plant = ((1.0 - a) / R) / (z - a)
-    ctl = w_c * L_c + w_c * R_c * T / (z - 1.0 + 1e-300)
-    delay = np.exp(-2j * math.pi * np.asarray(f, float) * d.current_loop_delay)
-    return 1.0 / (1.0 + ctl * plant * delay)
+    dc = np.abs(z - 1.0) < 1e-12                  # the integrator's pole: the loop removes all noise at DC
+    ctl = w_c * L_c + w_c * R_c * T / np.where(dc, 1.0, z - 1.0)
+    delay = np.exp(-2j * math.pi * f * d.current_loop_delay)
+    return np.where(dc, 0.0, 1.0 / (1.0 + ctl * plant * delay))
 
 
 def sensor_noise_density(ctx) -> float:
@@ -85,28 +87,26 @@ def acceleration_cross(ctx, fs_column: float, band=None):
     noise. ``band``: ``(sos, fs)``, a zero-phase low-pass applied again to the column AND the residual. Cached on
     the context per ``(fs_column, band)``."""
     key = ("loop_noise_cross", float(fs_column), None if band is None else (band[0].tobytes(), band[1]))
-    hit = ctx._cross_cache.get(key)
-    if hit is not None:
-        return hit
+    return ctx.memo(key, lambda: _cross(ctx, fs_column, band))
+
+
+def _cross(ctx, fs_column: float, band):
     density = sensor_noise_density(ctx)
     if not density > 0.0 or "mechanical" not in ctx.blocks:
-        def cross(response) -> float:
-            return 0.0
-    else:
-        from scipy.signal import sosfreqz
+        return lambda response: 0.0
+    from scipy.signal import sosfreqz
 
-        # log-spaced: a lightly damped column (damping ratio 0.005) is a peak 1 % of its frequency wide
-        f_top = min(0.5 * fs_column, 0.5 * ctx.fs, 4.0 * ctx.dec.fc)
-        f = np.r_[0.0, np.geomspace(1e-4 * f_top, f_top, 16000)]
-        _, H = sosfreqz(ctx.dec.sos, worN=f, fs=ctx.fs)
-        weight = (1.0 - sensitivity(ctx.params, f)) * np.abs(H) ** 4
-        if band is not None:
-            weight = weight * np.abs(sosfreqz(band[0], worN=f, fs=band[1])[1]) ** 4
-        scale = -2.0 * density / ctx.params.motor.rotor_inertia * int(ctx.train_rows("mechanical").sum())
+    # log-spaced: a lightly damped column (damping ratio 0.005) is a peak 1 % of its frequency wide
+    f_top = min(0.5 * fs_column, 0.5 * ctx.fs, 4.0 * ctx.dec.fc)
+    f = np.r_[0.0, np.geomspace(1e-4 * f_top, f_top, 16000)]
+    _, H = sosfreqz(ctx.dec.sos, worN=f, fs=ctx.fs)
+    weight = (1.0 - sensitivity(ctx.params, f)) * np.abs(H) ** 4
+    if band is not None:
+        weight = weight * np.abs(sosfreqz(band[0], worN=f, fs=band[1])[1]) ** 4
+    scale = -2.0 * density / ctx.params.motor.rotor_inertia * int(ctx.train_rows("mechanical").sum())
 
-        def cross(response) -> float:
-            return scale * float(np.trapezoid(np.real(response(f) * weight), f))
-    ctx._cross_cache[key] = cross
+    def cross(response) -> float:
+        return scale * float(np.trapezoid(np.real(response(f) * weight), f))
     return cross
 
 
