@@ -294,6 +294,7 @@ class Context:
     _col_cache: dict = field(default_factory=dict)
     _inst_cache: dict = field(default_factory=dict)
     _cross_cache: dict = field(default_factory=dict)
+    _memo_cache: dict = field(default_factory=dict)
     _rows_cache: dict = field(default_factory=dict)
 
     # decimated helpers
@@ -359,9 +360,9 @@ class Context:
 
     def memo(self, key, make: Callable[[], Any]) -> Any:
         """``make()`` once per context and ``key`` (derived quantities a search reuses across its grid)."""
-        if key not in self._cross_cache:
-            self._cross_cache[key] = make()
-        return self._cross_cache[key]
+        if key not in self._memo_cache:
+            self._memo_cache[key] = make()
+        return self._memo_cache[key]
 
     def cross(self, key) -> dict[str, float] | None:
         """Expected ``sum over an equation's training rows of column x residual`` for a column correlated with the
