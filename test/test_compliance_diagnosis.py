@@ -176,3 +176,38 @@ def test_two_encoders_name_the_backlash_and_write_it():
     assert f["parameters"]["transmission_stiffness"] == pytest.approx(K_TR, rel=0.1)
     assert f["simulation"]["verdict"] == "confirmed"
     assert rep.updated_params.gear.backlash == pytest.approx(0.004, rel=0.1)
+
+
+def test_rotor_only_compliance_reports_backlash_as_its_undecidable_alias():
+    """A 4 mrad backlash behind the spring, only the rotor's angle recorded: the load follows the dead zone through
+    the spring's mean stiffness, so the compliance is found with a softer spring (anti-resonance below the true 25
+    Hz) and which of the two it is, backlash or a softer spring, is not decidable: reported like dead time ~
+    resistance (an alias with the separating experiment -- a load encoder or a load reversal at low torque -- and a
+    "not decidable" caveat in the verdict), never as a clean compliance."""
+    truth = TRUTH.replace(**{"gear.backlash": 0.004})
+    rep = diagnose(closed_loop_recording(truth, NOMINAL, reference, duration=16.0, seed=5), NOMINAL)
+    d = rep.to_dict()
+    assert [f["effect"] for f in d["findings"]] == ["transmission_compliance"], d["verdict"]
+    assert d["findings"][0]["parameters"]["antiresonance_frequency"] < F_A
+    al = [a for a in d["aliases"] if set(a["effects"]) == {"transmission_compliance", "backlash"}]
+    assert al and al[0]["chosen"] == "transmission_compliance"
+    assert "load_position" in al[0]["experiment"] and "reverse the load at low torque" in al[0]["experiment"]
+    assert d["verdict_kind"] == "found" and "not decidable" in d["verdict"] and "backlash" in d["verdict"]
+    nd = next(r for r in d["rejected"] if r["effect"] == "backlash")
+    assert nd["verdict"] == "not_decidable" and nd["alias_of"] == "transmission_compliance"
+    assert "load_position" in nd["remedy"]
+
+
+def test_with_a_load_encoder_backlash_and_spring_stay_separately_identified():
+    """The same backlash with the load encoder recorded: the dead zone's width (4 mrad) and the spring (k within
+    10 %) come out of one fit, and no backlash alias is reported (the backlash candidate says it is a form of the
+    compliance there)."""
+    truth = TRUTH.replace(**{"gear.backlash": 0.004})
+    d = diagnose(_two_encoder_recording(truth, NOMINAL), NOMINAL).to_dict()
+    f = d["findings"][0]
+    assert f["parameters"]["backlash"] == pytest.approx(0.004, rel=0.1)
+    assert f["parameters"]["transmission_stiffness"] == pytest.approx(K_TR, rel=0.1)
+    assert not [a for a in d["aliases"] if "backlash" in a["effects"]]
+    assert "backlash" not in d["verdict"]
+    nc = next(n for n in d["not_checkable"] if n["effect"] == "backlash")
+    assert "form of transmission_compliance" in nc["reason"]

@@ -68,6 +68,9 @@ class Candidate:
     variants: Callable = None                     #: (ctx, locate) -> list[Variant]
     excited: Callable = None                      #: (ctx) -> None | reason it is not identifiable here
     to_params: Callable = None                    #: (coef, cov, keys, variant, ctx) -> Finding parameters
+    #: a candidate that is never fitted on its own but may hide behind these accepted effects (checked as an
+    #: alias only for them, :func:`..selection.unexcited_aliases`); None: behind any effect sharing an equation
+    hides_behind: tuple[str, ...] | None = None
 
 
 def _smooth_sign(x, eps):
@@ -249,6 +252,13 @@ def col_compliance(f_a: float, zeta: float):
             if hi > lo:
                 y[lo:hi], _ = lfilter(b, a, x[lo:hi], zi=zi * x[lo])
         return {"mechanical": y}
+
+    def cross(ctx):
+        """the loop-fed current-sensor noise this column shares with the residual (fitted out: :mod:`.loop_noise`)"""
+        from .loop_noise import filter_cross
+
+        return filter_cross(ctx, *compliance_filter(f_a, zeta, ctx.fs), ctx.fs)
+    build.cross = cross
     return build
 
 
@@ -354,6 +364,25 @@ def excite_compliance(ctx):
                                       f"holds {100 * share:.2g} % of its variance there)")
 
 
+#: what separates a backlash from a softer spring when only the rotor's angle is recorded
+BACKLASH_EXPERIMENT = ("record the load's angle behind the transmission (a load-side encoder, column load_position: "
+                       "the dead zone shows on the measured deflection), or reverse the load at low torque (a slow "
+                       "reversal of the transmission torque: inside the dead zone the rotor runs free of the load, "
+                       "behind a spring it does not)")
+
+
+def excite_backlash(ctx):
+    """Never fitted on its own. With a load encoder the backlash is a form of transmission_compliance (the dead zone
+    on the measured deflection); from the rotor's angle alone a dead zone behind a stiffer spring moves the rotor
+    like a softer spring (the load follows through the spring's mean stiffness), so it is not checkable and is
+    reported as the compliance finding's alias (:func:`v_backlash`)."""
+    if "theta_load" in ctx.sig:
+        return ("with the load encoder (load_position) it is identified as a form of transmission_compliance "
+                "(the dead zone on the measured deflection)")
+    return ("needs the load's angle (a load-side encoder, load_position) or a load reversal at low torque: from the "
+            "rotor's angle alone a dead zone behind a spring moves the rotor like a softer spring")
+
+
 def excite_dead_time(ctx):
     i = ctx.dsig("i_q")
     pos, neg = _frac(i > 0), _frac(i < 0)
@@ -448,6 +477,19 @@ def col_eripple(order, which, kind):
 #: the band reached 70 Hz); a minimum at the top of the band is that deficit, not a resonance, and is not offered
 COMPLIANCE_MIN_HZ = 3.0
 COMPLIANCE_TOP_OF_BAND = 0.4
+#: the compliance search (its grid of anti-resonances) fits the residual and the column low-passed at this fraction of
+#: the equation error's cut-off: above it the residual keeps, by design, the angle-locked torques whose columns are
+#: switched off there (:func:`resolvable`), and a torque the model leaves out moves the rotor, so the residual
+#: follows the acceleration with the opposite sign -- the shape of a load that decouples (builtin
+#: cogging_drive_log_10khz: an "anti-resonance" at 8.9 Hz fitted on the cogging left in 60-100 Hz, where the
+#: residual followed -0.6 x the inertia's torque with coherence 0.9). Only the search: the final fit keeps the whole
+#: band (low-passing the column alone biases its coefficient by the filter's transition).
+COMPLIANCE_EVIDENCE_OF_BAND = 0.5
+
+
+def compliance_evidence_hz(ctx) -> float:
+    """[Hz] the compliance search's band (:data:`COMPLIANCE_EVIDENCE_OF_BAND` of the cut-off)."""
+    return COMPLIANCE_EVIDENCE_OF_BAND * ctx.dec.fc
 
 
 #: the backlash form (two encoders) is offered when it lowers the linear form's training residual by at least this
@@ -526,35 +568,64 @@ def compliance_band(ctx) -> tuple[float, float] | None:
     return (COMPLIANCE_MIN_HZ, hi) if hi > 2.0 * COMPLIANCE_MIN_HZ else None
 
 
-def _compliance_rss(ctx):
-    """``rss(f_a, zeta) -> (rss, coefficient)``: the nominal mechanical residual (training rows) fitted by the
-    compliance column (with the always-fitted nuisance columns), the column filtered at the DECIMATED rate from the
-    decimated acceleration (both linear: a quick stand-in for the raw-rate column, for the search only)."""
-    from scipy.signal import lfilter, lfilter_zi
+def _compliance_rss(ctx, loc=None):
+    """``rss(f_a, zeta) -> (rss, coefficient, noise_coefficient)``: the nominal mechanical residual (training rows)
+    fitted by the compliance column (with the always-fitted nuisance columns and the angle harmonics of the orders
+    the locate stage found in it: an angle-locked torque moves the rotor, so it is fitted beside the column, not
+    through it), all low-passed again at
+    :func:`compliance_evidence_hz`; the column filtered at the DECIMATED rate from the decimated acceleration (all
+    linear: a quick stand-in for the raw-rate column, for the search only). Bias-compensated: the current sensor's
+    noise that the drive's loop feeds into the motor makes the residual and the acceleration share a noise of
+    opposite signs (:mod:`.loop_noise`), whose expected cross product is taken out of the normal equations;
+    ``noise_coefficient`` is the reflected inertia that noise alone would give the column (plain least squares =
+    ``coefficient + noise_coefficient``), ``rss`` the residual left by the compensated fit."""
+    from scipy.signal import butter, lfilter, lfilter_zi, sosfiltfilt
+
+    from .loop_noise import filter_cross
 
     B = ctx.blocks["mechanical"]
     rows = ctx.train_rows("mechanical")
-    y = B.target[rows]
     K = np.broadcast_to(np.asarray(ctx.sig["K"], float), ctx.sig["omega_dot"].shape)
     x = ctx.dec.apply(ctx.sig["omega_dot"] / K)
     fs_dec = ctx.fs / max(ctx.dec.q, 1)
     runs = np.flatnonzero(np.diff(ctx.dec.seg_of)) + 1
     bounds = list(zip(np.r_[0, runs], np.r_[runs, len(x)]))
+    band = compliance_evidence_hz(ctx)
+    sos = butter(ctx.dec.order, min(band, 0.45 * fs_dec) / (0.5 * fs_dec), output="sos")
+
+    def clean(v):
+        out = np.nan_to_num(np.asarray(v, float))
+        for lo, hi in bounds:
+            if hi - lo > 6 * (2 * ctx.dec.order + 1):
+                out[lo:hi] = sosfiltfilt(sos, out[lo:hi])
+        return out
+
+    y = clean(B.target)[rows]
+    yy = float(y @ y)
     nuis = [ctx.column(k, b).get("mechanical") for k, b in ctx.nuisance.items()]
-    X0 = [c[rows] for c in nuis if c is not None]
+    peaks = ((loc or {}).get("mechanical") or {}).get("order_spectrum") or {}
+    for o in sorted({int(pk["order"]) for pk in peaks.get("peaks", [])[:6]}):
+        nuis += [ctx.column(f"cog{o}{w[0]}1", col_harmonic(o, 1, w)).get("mechanical") for w in ("cos", "sin")]
+    X0 = [clean(c)[rows] for c in nuis if c is not None]
 
     def rss(f_a, zeta):
         if not 0.0 < f_a < 0.45 * fs_dec:
-            return float("inf"), 0.0
+            return float("inf"), 0.0, 0.0
         b, a = compliance_filter(f_a, zeta, fs_dec)
         col = np.zeros_like(x)
         zi = lfilter_zi(b, a)
         for lo, hi in bounds:
             col[lo:hi], _ = lfilter(b, a, x[lo:hi], zi=zi * x[lo])
-        X = np.column_stack([col[rows]] + X0)
-        beta, *_ = np.linalg.lstsq(X, y, rcond=None)
-        r = y - X @ beta
-        return float(r @ r), float(beta[0])
+        X = np.column_stack([clean(col)[rows]] + X0)
+        G, g = X.T @ X, X.T @ y
+        bias = np.zeros(len(g))
+        bias[0] = filter_cross(ctx, b, a, fs_dec, (sos, fs_dec))["mechanical"]
+        try:
+            beta = np.linalg.solve(G, g - bias)
+            plain = np.linalg.solve(G, g)
+        except np.linalg.LinAlgError:
+            return float("inf"), 0.0, 0.0
+        return yy - float((g - bias) @ beta), float(beta[0]), float(plain[0] - beta[0])
     return rss
 
 
@@ -583,10 +654,10 @@ def v_compliance(ctx, loc):
     if band is None or "mechanical" not in ctx.blocks:
         return []
     lo, hi = band
-    rss = _compliance_rss(ctx)
+    rss = _compliance_rss(ctx, loc)
     fs = np.geomspace(lo, hi, COMPLIANCE_GRID)
-    table = np.array([[rss(float(f), z) for z in COMPLIANCE_ZETA_GRID] for f in fs])   # (f, zeta, [rss, coef])
-    val = np.where(table[:, :, 1] > 0, table[:, :, 0], np.inf)
+    table = np.array([[rss(float(f), z) for z in COMPLIANCE_ZETA_GRID] for f in fs])   # (f, zeta, [rss, coef, noise])
+    val = np.where(table[:, :, 1] > table[:, :, 2], table[:, :, 0], np.inf)
     best_z = np.argmin(val, axis=1)
     curve = val[np.arange(len(fs)), best_z]
     minima = [i for i in range(1, len(fs) - 1) if np.isfinite(curve[i])
@@ -598,8 +669,8 @@ def v_compliance(ctx, loc):
 
         def cost(v):
             f, z = math.exp(v[0]), math.exp(min(max(v[1], math.log(0.005)), math.log(1.0)))
-            r, c = rss(f, z)
-            return r if c > 0 else r + abs(r)
+            r, c, c_noise = rss(f, z)
+            return r if c > c_noise else r + abs(r)
 
         res = minimize(cost, x0, method="Nelder-Mead", options={"xatol": 0.002, "fatol": 1e-9 * curve[i],
                                                                  "maxiter": 200, "initial_simplex":
@@ -608,12 +679,33 @@ def v_compliance(ctx, loc):
         zeta = float(min(max(math.exp(res.x[1]), 0.005), 1.0))
         if not lo < f < hi:     # refined onto or beyond the band's edge: not a resolved anti-resonance
             continue
+        _, c, c_noise = rss(f, zeta)
+        if not c > c_noise:     # at least half of the plain fit must be more than the loop-fed sensor noise
+            continue
         key = f"compliance@{f:.6g},{zeta:.4g}"
         out.append(Variant("transmission_compliance", f"anti-resonance {f:.3g} Hz, damping ratio {zeta:.2g}",
                            {key: col_compliance(f, zeta)}, hyper={"f_a": f, "zeta": zeta},
                            nonlinear={"f_a": (f, max(lo, f / 1.15), min(hi, f * 1.15),
                                               lambda c, v, key=key, zeta=zeta: {key: col_compliance(v, zeta)})}))
     return out
+
+
+def v_backlash(ctx, loc):
+    """The forms a backlash takes seen from the rotor alone: the compliance forms themselves (the load follows a
+    dead zone behind a stiffer spring through its mean stiffness: the same column at the softer spring's
+    anti-resonance), so the alias with an accepted compliance is exact; none with a load encoder (there the dead
+    zone is fitted on the measured deflection, a form of transmission_compliance)."""
+    if "theta_load" in ctx.sig:
+        return []
+    return [Variant("backlash", f"a dead zone behind a stiffer spring, seen from the rotor alone ({v.label})",
+                    v.columns, hyper=dict(v.hyper, kind="rotor"))
+            for v in v_compliance(ctx, loc)]
+
+
+def params_backlash(coef, cov, keys, variant, ctx):
+    """Not identifiable from the rotor alone (the dead zone's width trades against the spring's stiffness): no
+    values, the alias says which experiment separates them."""
+    return {}
 
 
 def v_eripple(ctx, loc):
@@ -952,6 +1044,11 @@ def library() -> dict[str, Candidate]:
                    "acceleration at every frequency, a compliance only above the anti-resonance",
                    "current_loop_delay": "a load encoder (joint side) measures the deflection directly"},
                   v_compliance, excite_compliance, params_compliance))
+    add(Candidate("backlash", ("mechanical",), mech_needs,
+                  "backlash: a dead zone in the transmission (gear play) behind its spring; identified with a load "
+                  "encoder (a form of transmission_compliance), an alias of the compliance from the rotor alone",
+                  True, {"transmission_compliance": BACKLASH_EXPERIMENT},
+                  v_backlash, excite_backlash, params_backlash, hides_behind=("transmission_compliance",)))
     add(Candidate("resistance_error", ("electrical",), ("voltage_q", "current", "velocity|position"),
                   "the winding resistance is off (at the reference temperature)", True,
                   {"resistance_temperature": "hold a current while the winding warms, with winding temperature "

@@ -293,6 +293,8 @@ class Context:
     drive_identified: dict | None = None
     _col_cache: dict = field(default_factory=dict)
     _inst_cache: dict = field(default_factory=dict)
+    _cross_cache: dict = field(default_factory=dict)
+    _memo_cache: dict = field(default_factory=dict)
     _rows_cache: dict = field(default_factory=dict)
 
     # decimated helpers
@@ -315,12 +317,17 @@ class Context:
         """Decimated column ``key`` (equation -> array), built at the raw rate by ``builder`` and cached.
 
         Built twice when a current instrument exists: with the measured current (the regressor) and with
-        the aligned current command (its instrument, :meth:`instrument`)."""
+        the aligned current command (its instrument, :meth:`instrument`). A builder with a ``cross`` attribute
+        (``cross(ctx) -> {eq: float}``) states the expected cross product of its column with the equation's
+        residual noise (:meth:`cross`)."""
         if key not in self._col_cache:
             S = self.sig
             S["i_col"] = S.get("i_q")
             out = self._build(builder)
             self._col_cache[key] = out
+            cross = getattr(builder, "cross", None)
+            if cross is not None:
+                self._cross_cache[key] = cross(self)
             if "i_inst" in S:
                 S["i_col"] = S["i_inst"]
                 try:
@@ -350,6 +357,18 @@ class Context:
     def instrument(self, key) -> dict[str, np.ndarray] | None:
         """Instrument of a column built from the measured current (see :func:`_regressor_current`)."""
         return self._inst_cache.get(key)
+
+    def memo(self, key, make: Callable[[], Any]) -> Any:
+        """``make()`` once per context and ``key`` (derived quantities a search reuses across its grid)."""
+        if key not in self._memo_cache:
+            self._memo_cache[key] = make()
+        return self._memo_cache[key]
+
+    def cross(self, key) -> dict[str, float] | None:
+        """Expected ``sum over an equation's training rows of column x residual`` for a column correlated with the
+        residual's noise by construction (the loop-fed current-sensor noise in the acceleration: :mod:`.loop_noise`),
+        taken out of the normal equations by :func:`fit_columns` (bias-compensated least squares)."""
+        return self._cross_cache.get(key)
 
     def _build(self, builder) -> dict[str, np.ndarray]:
         raw = builder(self)
@@ -835,6 +854,7 @@ def fit_columns(ctx: Context, cols: dict[str, dict[str, np.ndarray]], keys: list
     blocks = blocks or list(ctx.blocks)
     Xs, Zs, ys, parts = [], [], [], []
     use_iv = False
+    bias = np.zeros(len(keys))      # expected Xᵀe of columns correlated with the noise by construction
     for eq in blocks:
         B = ctx.blocks[eq]
         rows = ctx.train_rows(eq)
@@ -844,6 +864,7 @@ def fit_columns(ctx: Context, cols: dict[str, dict[str, np.ndarray]], keys: list
         for j, k in enumerate(keys):
             c = cols[k].get(eq)
             if c is not None:
+                bias[j] += w * w * float((ctx.cross(k) or {}).get(eq, 0.0))
                 X[:, j] = ctx.on_train(c, eq)
                 inst = ctx.instrument(k)
                 if inst is not None and inst.get(eq) is not None:
@@ -862,7 +883,10 @@ def fit_columns(ctx: Context, cols: dict[str, dict[str, np.ndarray]], keys: list
         scale = np.sqrt((X ** 2).sum(axis=0))
         scale[scale == 0] = 1.0
         Xn, Zn = X / scale, Z / scale
-        if use_iv:   # instrumental variables: Zᵀ(y - Xβ) = 0
+        if bias.any():   # bias-compensated: Zᵀ(y - Xβ) = E[Zᵀe]
+            use_iv = True
+            beta_n, *_ = np.linalg.lstsq(Zn.T @ Xn, Zn.T @ y - bias / scale, rcond=1e-12)
+        elif use_iv:   # instrumental variables: Zᵀ(y - Xβ) = 0
             beta_n, *_ = np.linalg.lstsq(Zn.T @ Xn, Zn.T @ y, rcond=1e-12)
         else:
             beta_n, *_ = np.linalg.lstsq(Xn, y, rcond=1e-10)

@@ -533,12 +533,15 @@ def unexcited_aliases(ctx: Context, loc: dict, lib: dict[str, Candidate], sel: S
         if y not in lib or not why.startswith(prefix) or lib[y].variants is None:
             continue
         cand = lib[y]
+        if cand.hides_behind is not None and not any(a.effect in cand.hides_behind for a in sel.accepted):
+            continue
         try:
             variants = cand.variants(ctx, loc) or []
         except (ValueError, KeyError, IndexError, FloatingPointError):
             continue
         for a in sel.accepted:
-            if not set(cand.equations) & set(lib[a.effect].equations):
+            if not set(cand.equations) & set(lib[a.effect].equations) or \
+                    (cand.hides_behind is not None and a.effect not in cand.hides_behind):
                 continue
             keys_without = [k for k in sel.final_fit.keys if k not in a.added]
             its = {k: v for k, v in sel.iterating.items() if k in keys_without}

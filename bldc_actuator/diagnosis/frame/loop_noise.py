@@ -1,0 +1,119 @@
+"""The current sensor's noise fed back into the motor by the drive's own current loop (closed-loop data).
+
+A drive regulates the current its sensor MEASURES, ``i_m = i + n``: within the loop's band it makes ``i_m`` follow
+the command, so the motor's real current is ``i = T(i_ref - n)`` (``T`` the loop's complementary sensitivity, 1 in
+the band) and the sensor noise ``n`` the log still shows as the difference is a real torque noise ``-K T n`` that
+moves the rotor. The mechanical equation's residual, ``i_m - J omega'/K``, is then ``n`` itself, and the measured
+acceleration holds ``-(K/J) T n``: the two are correlated, with a cross-spectrum ``-T(f) sigma^2/f_tick`` that does
+not depend on the motion. Least squares reads that as an inertia that falls where the noise-driven acceleration
+outweighs the commanded motion -- a load decoupling above an "anti-resonance" (four builtin 10 kHz drive logs:
+9-21 Hz, a reflected load of a third of the rotor inertia, refused by the simulation judge). The same cross term
+exists at every log rate (a 1 kHz log of the same drive gives the same coefficient); only at the current loop's
+own rate does it stand out of the residual's noise.
+
+Here: the loop's sensitivity ``S`` as the linearised drive of :mod:`bldc_actuator.kernel` (discrete PI, ``K_p =
+2 pi f_bw L_ctl``, ``K_i = 2 pi f_bw R_ctl``, on the zero-order-hold R-L plant, its computation delay), the sensor's
+noise level from the logged current's top band (there ``|S|^2 sigma^2``, aliased when the log keeps every m-th
+tick), and the expected cross product of a column made from the acceleration with the residual, for
+bias-compensated least squares (``(X'X) beta = X'y - E[X'e]``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ...params import ActuatorParams, controller_motor
+
+#: band of the log (fractions of its rate) where the logged current is read as sensor noise
+TOP_BAND = (0.4, 0.5)
+
+
+def sensitivity(p: ActuatorParams, f) -> np.ndarray:
+    """``S(f)`` (complex) of the drive's discrete q-current loop: sensor noise -> measured current (``1 - S`` = the
+    share the loop puts into the motor, with its sign reversed). At the current loop's rate ``f_tick``: one tick's
+    zero-order-hold R-L plant ``b/(z - a)`` under the PI ``K_p + K_i T/(z - 1)``, the computation delay as
+    ``exp(-j 2 pi f d)``."""
+    d = p.drive
+    R, L = p.motor.phase_resistance, p.motor.q_inductance
+    R_c, L_c, _ = controller_motor(p)
+    T = 1.0 / d.current_loop_rate
+    w_c = 2.0 * math.pi * d.current_loop_bandwidth
+    f = np.asarray(f, float)
+    z = np.exp(2j * math.pi * f * T)
+    a = math.exp(-R * T / L)
+    plant = ((1.0 - a) / R) / (z - a)
+    dc = np.abs(z - 1.0) < 1e-12                  # the integrator's pole: the loop removes all noise at DC
+    ctl = w_c * L_c + w_c * R_c * T / np.where(dc, 1.0, z - 1.0)
+    delay = np.exp(-2j * math.pi * f * d.current_loop_delay)
+    return np.where(dc, 0.0, 1.0 / (1.0 + ctl * plant * delay))
+
+
+def sensor_noise_density(ctx) -> float:
+    """Two-sided density ``sigma^2 / f_tick`` [A^2/Hz] of the current sensor's white noise per current-loop tick,
+    from the logged current's variance in :data:`TOP_BAND` of the log rate ``f_s`` (there the loop's motion is
+    negligible): that band holds ``sum_aliases |S|^2 sigma^2/f_tick`` (the ticks the log keeps fold the tick band
+    onto the log's). 0 without a current."""
+    S = ctx.sig
+    if "i_q" not in S or ctx.steady:
+        return 0.0
+    p, fs = ctx.params, ctx.fs
+    lo, hi = TOP_BAND
+    i = S["i_q"]
+    top = i - ctx.dec.lowpass(i, lo * fs)
+    mask = np.ones(len(i), bool)
+    for a, b in ctx.segments:
+        mask[a:a + 10] = False
+        mask[max(b - 10, a):b] = False
+    var = float(np.var(top[mask])) if mask.any() else 0.0
+    density_log = var / (2.0 * (hi - lo) * fs)            # two-sided, over +-(lo..hi) fs
+    f_tick = p.drive.current_loop_rate
+    f = np.linspace(lo, hi, 9) * fs
+    k = np.arange(-int(f_tick / fs) - 2, int(f_tick / fs) + 3)
+    alias = f[:, None] + k[None, :] * fs
+    inside = np.abs(alias) <= 0.5 * f_tick * (1 + 1e-9)
+    gain = np.where(inside, np.abs(sensitivity(p, alias)) ** 2, 0.0).sum(axis=1)
+    gain = float(np.mean(gain))
+    return density_log / gain if gain > 0 else 0.0
+
+
+def acceleration_cross(ctx, fs_column: float, band=None):
+    """``cross(response) -> float``: the expected ``sum over training rows of c_r e_r`` for a mechanical column ``c``
+    = ``response`` (a callable of frequency [Hz]; a filter applied at rate ``fs_column`` to ``omega'/K``) and the
+    residual ``e``, both low-passed by the context's zero-phase filter:
+    ``-(1/J) int F(f) |H(f)|^4 T(f) sigma^2/f_tick df`` per row. Negative for a column that follows the
+    acceleration (the residual is the noise the acceleration holds with the opposite sign); 0 without sensor
+    noise. ``band``: ``(sos, fs)``, a zero-phase low-pass applied again to the column AND the residual. Cached on
+    the context per ``(fs_column, band)``."""
+    key = ("loop_noise_cross", float(fs_column), None if band is None else (band[0].tobytes(), band[1]))
+    return ctx.memo(key, lambda: _cross(ctx, fs_column, band))
+
+
+def _cross(ctx, fs_column: float, band):
+    density = sensor_noise_density(ctx)
+    if not density > 0.0 or "mechanical" not in ctx.blocks:
+        return lambda response: 0.0
+    from scipy.signal import sosfreqz
+
+    # log-spaced: a lightly damped column (damping ratio 0.005) is a peak 1 % of its frequency wide
+    f_top = min(0.5 * fs_column, 0.5 * ctx.fs, 4.0 * ctx.dec.fc)
+    f = np.r_[0.0, np.geomspace(1e-4 * f_top, f_top, 16000)]
+    _, H = sosfreqz(ctx.dec.sos, worN=f, fs=ctx.fs)
+    weight = (1.0 - sensitivity(ctx.params, f)) * np.abs(H) ** 4
+    if band is not None:
+        weight = weight * np.abs(sosfreqz(band[0], worN=f, fs=band[1])[1]) ** 4
+    scale = -2.0 * density / ctx.params.motor.rotor_inertia * int(ctx.train_rows("mechanical").sum())
+
+    def cross(response) -> float:
+        return scale * float(np.trapezoid(np.real(response(f) * weight), f))
+    return cross
+
+
+def filter_cross(ctx, b, a, fs_filter: float, band=None) -> dict[str, float]:
+    """``{"mechanical": expected sum of c_r e_r}`` for the column ``c`` = the acceleration through the digital filter
+    ``(b, a)`` at rate ``fs_filter`` (``band``: see :func:`acceleration_cross`); a column builder's ``cross``."""
+    from scipy.signal import freqz
+
+    cross = acceleration_cross(ctx, fs_filter, band)
+    return {"mechanical": cross(lambda f: freqz(b, a, worN=f, fs=fs_filter)[1])}
