@@ -296,13 +296,13 @@ SIM_MOVE = 0.01
 
 def simulated_verdict(report: dict) -> tuple[str | None, str]:
     """Compare the report's held-out simulations before -> after (``compare.replay.holdout`` short-window
-    replay: velocity, current, position; ``compare.thermal``: full-length temperature): "better" when one
+    replay: velocity, current, position, q-voltage where recorded; ``compare.thermal``: full-length temperature): "better" when one
     channel improves by more than 1 % and none gets worse by more than 1 %."""
     cmp_ = report.get("compare") or {}
     pairs = []
     ho = ((cmp_.get("replay") or {}).get("holdout") or {})
     if ho.get("before") and ho.get("after"):
-        for ch in ("velocity_rms", "current_rms", "position_rms"):
+        for ch in ("velocity_rms", "current_rms", "position_rms", "voltage_rms"):
             b, a = _num(ho["before"].get(ch)), _num(ho["after"].get(ch))
             if b and a is not None:
                 pairs.append((ch.replace("_rms", ""), b, a))

@@ -391,7 +391,7 @@ def window_errors(ctx: Context, param_sets: list[ActuatorParams], starts: list[i
 def replay(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], length: float,
            drive: str = "closed_loop") -> list[dict[str, Any]]:
     """Simulate every window under every parameter set (one BatchActuator); per set: RMS error of current
-    [A], speed [rad/s] and angle [rad] against the (low-passed) measurements, and the traces of the first
+    [A], speed [rad/s], angle [rad] and q-voltage [V] (where recorded) against the (low-passed) measurements, and the traces of the first
     windows for plots. ``drive``: ``closed_loop`` (the drive emulated from the recorded commands) or ``current``
     (the mechanical equation driven by the measured current, :func:`simulate_windows`)."""
     if not starts or "i_q" not in ctx.sig or "omega" not in ctx.sig:
@@ -412,6 +412,10 @@ def replay(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], le
                                                if meas_v is not None else None)},
                     "current_rms": float(np.sqrt(np.mean(ei ** 2))), "velocity_rms": float(np.sqrt(np.mean(ew ** 2))),
                     "position_rms": float(np.sqrt(np.mean(eth ** 2))),
+                    # q-voltage at the recorded speed (the replay's back-EMF error removed): where the voltage-side
+                    # effects (resistance, dead time, K_t's back-EMF) show in a current-controlled drive
+                    "voltage_rms": (float(np.sqrt(np.mean((sim_v[:, sl] - meas_v[:, sl]) ** 2)))
+                                    if meas_v is not None else None),
                     # RMS of the recorded channel itself over the windows: what an error is measured against
                     "signal_rms": {"current": float(np.sqrt(np.mean(meas_i[:, sl] ** 2))),
                                    "velocity": float(np.sqrt(np.mean(meas_w[:, sl] ** 2))),

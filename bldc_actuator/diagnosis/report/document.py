@@ -243,7 +243,9 @@ def _markdown(r: DiagnosisReport, images: dict[str, str]) -> str:
                      f"{_g(m['updated']['train_rms'])} | {m['nominal']['unit']} |")
         rp = (c.get("replay") or {}).get("holdout")
         if rp and rp["before"].get("available"):
-            for ch, unit in (("current", "A"), ("velocity", "rad/s"), ("position", "rad")):
+            for ch, unit in (("current", "A"), ("velocity", "rad/s"), ("position", "rad"), ("voltage", "V")):
+                if rp["before"].get(ch + "_rms") is None or rp["after"].get(ch + "_rms") is None:
+                    continue
                 L.append(f"| short-window simulation {ch} error RMS, held-out ({rp['before']['windows']} x "
                          f"{_g(rp['before']['window_s'])} s) | {_g(rp['before'][ch + '_rms'])} | "
                          f"{_g(rp['after'][ch + '_rms'])} | {unit} |")

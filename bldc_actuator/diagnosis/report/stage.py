@@ -136,6 +136,10 @@ def run(signals, params, s: Search, j: Judgement, m: Model, options, say: Say, t
                                  "unit": "rad/s", "before": before["velocity_rms"], "after": after["velocity_rms"]})
             f["metrics"].append({"metric": "short-window simulation current error RMS (held-out)", "unit": "A",
                                  "before": before["current_rms"], "after": after["current_rms"]})
+            if before.get("voltage_rms") is not None and after.get("voltage_rms") is not None:
+                f["metrics"].append({"metric": "short-window simulation q-voltage error RMS (held-out, at the recorded "
+                                               "speed)", "unit": "V", "before": before["voltage_rms"],
+                                     "after": after["voltage_rms"]})
     thermal_cmp = None
     if any(c in ctx.have for c in ("winding_temperature", "housing_temperature")) and "i_q" in ctx.sig:
         tb = refit.thermal_error(ctx, params)
