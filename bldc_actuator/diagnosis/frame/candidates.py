@@ -205,10 +205,12 @@ def col_dead_band(band: float):
 
 #: current bands the dead-time candidate offers besides the sign, as fractions of the 95th percentile of the
 #: recorded |i_dq|: in a drive whose current chatters about zero (a sign sampled once per control period, as in
-#: motulator's converter) or whose switching ripple reverses small currents, the legs' error is linear inside the
-#: band; with the sign form a 2 us dead time at 5 kHz was fitted 44 % high on such a recording, and the simulated
-#: drive (a relay: the full error at 0.06 A) demanded 0.37 V where the recording held none
-DEAD_TIME_BANDS = (0.1, 0.25, 0.6, 1.5)
+#: motulator's converter and gym-electric-motor's) or whose switching ripple reverses small currents, the legs'
+#: error is linear inside the band (gym-electric-motor: 1.26 us for 1 with the sign, 1.01 with a 0.22 A band)
+DEAD_TIME_BANDS = (0.05, 0.12, 0.25, 0.5)
+#: the widest band offered or refined, same units: a band the currents seldom leave is a resistance (R i) in
+#: disguise (a 40 % resistance error on motulator's near-zero current was fitted as a 0.64 A band at i95 0.18 A)
+DEAD_TIME_BAND_MAX = 0.5
 
 
 def v_dead_time(ctx, loc):
@@ -216,8 +218,9 @@ def v_dead_time(ctx, loc):
     (:data:`DEAD_TIME_BANDS`), the band refined in the final fit."""
     out = [Variant("dead_time", "dead_time", {"dead": col_dead_time})]
     if "theta" not in ctx.sig or excite_dead_time(ctx):
-        # the band is where currents cross zero: a current that never reverses does not show it, and there a band
-        # wider than the current's swing is R i in disguise (what the unexcited-alias check must not be offered)
+        # under a one-signed current the sign form is a constant and a band only adds a ripple correction to it
+        # that the equation error cannot size; the unexcited-alias check must not be offered a band wider than the
+        # current's swing there either (R i in disguise)
         return out
     i = np.hypot(ctx.dsig("i_q"), ctx.dsig("i_d") if "i_d" in ctx.sig else 0.0)
     ref = float(np.percentile(i, 95)) if len(i) else 0.0
@@ -227,7 +230,8 @@ def v_dead_time(ctx, loc):
         b = f * ref
         key = f"dead_band@{b:.6g}"
         out.append(Variant("dead_time", f"current band {b:.3g} A", {key: col_dead_band(b)}, hyper={"dead_time_current_band": b},
-                           nonlinear={"dead_time_current_band": (b, max(0.05 * ref, b / 2.5), min(4.0 * ref, b * 2.5),
+                           nonlinear={"dead_time_current_band": (b, max(0.02 * ref, b / 2.5),
+                                                                 min(DEAD_TIME_BAND_MAX * ref, b * 2.5),
                                                lambda c, v, key=key: {key: col_dead_band(v)})}))
     return out
 
