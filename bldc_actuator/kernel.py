@@ -46,7 +46,8 @@ _COEF_SCALARS = (
     "T_c", "Kp", "Ki", "decouple", "T_derate", "T_trip", "T_amb", "R_wh", "R_ha", "C_w", "C_h",
     "tau_c", "tau_asym", "tau_s", "omega_s", "cog_order", "load0", "load_g", "load_phi", "load_k", "load_k0",
     "has_alpha", "has_beta", "has_stribeck", "has_friction", "has_position_load", "k_sat",
-    "fe_h", "fe_e", "sens_off_a", "sens_off_b", "sens_gain_a", "sens_gain_b", "has_sensor_error", "v_dt", "dt_delta", "dt_band",
+    "fe_h", "fe_e", "sens_off_a", "sens_off_b", "sens_gain_a", "sens_gain_b", "has_sensor_error", "v_dt", "dt_delta",
+    "dt_band",
     "v_lim_mode", "I_fw", "R_ctl", "L_ctl", "K_ctl",
     # transmission (gear.*, output side): stiffness, damping, load inertia, half the backlash; has_compliance 0 = rigid
     "k_tr", "c_tr", "J_l", "bl_half", "has_compliance",

@@ -77,8 +77,8 @@ def test_band_over_an_interval_tends_to_the_sign_clamp(winding):
         assert abs(wide) <= abs(kernel.dead_time_error_dq(i, 0j, th, V_DT, flag, 0.0, 0.0)) + 1e-12
 
 
-NOMINAL = ActuatorParams().replace(**{"gear.gear_ratio": 9.0, "motor.rotor_inertia": 5 * ActuatorParams().motor.rotor_inertia,
-                                      "drive.pwm_frequency": 20000.0})
+NOMINAL = ActuatorParams().replace(**{"gear.gear_ratio": 9.0, "drive.pwm_frequency": 20000.0,
+                                      "motor.rotor_inertia": 5 * ActuatorParams().motor.rotor_inertia})
 BAND = 2.0     # [A] line current
 TRUTH = NOMINAL.replace(**{"drive.dead_time": V_DT / (20000.0 * NOMINAL.drive.bus_voltage),
                            "drive.dead_time_current_band": BAND})

@@ -67,7 +67,8 @@ def test_dead_time_under_a_one_signed_current_the_data_separate_is_named_in_plac
     sig = closed_loop_recording(truth, NOMINAL, _reference(2.0), duration=12.0, seed=1)
     assert np.percentile(sig.channels["current"], 0.5) > 0.0
     rep = diagnose(sig, NOMINAL, options=DiagnoseOptions(simulation_gate=False)).to_dict()
-    assert [f["effect"] for f in rep["findings"]] == ["dead_time"], [(r["effect"], r["reason"]) for r in rep["rejected"]]
+    assert [f["effect"] for f in rep["findings"]] == ["dead_time"], \
+        [(r["effect"], r["reason"]) for r in rep["rejected"]]
     f = rep["findings"][0]
     assert f["parameters"]["dead_time"] == pytest.approx(2e-6, rel=0.05)
     assert not [a for a in rep["aliases"] if "dead_time" in a["effects"]]

@@ -63,4 +63,5 @@ def test_a_resistance_error_behind_a_turning_drive_is_found_and_sized():
     assert "resistance_error" in rep.effects, (rep.effects, [(r["effect"], r["reason"]) for r in rep.rejected])
     assert rep.updated_params.motor.phase_resistance == pytest.approx(truth.motor.phase_resistance, rel=0.025)
     null = diagnose(_recording(NOMINAL, 3), NOMINAL, options=DiagnoseOptions(holdout_signals=_recording(NOMINAL, 4)))
-    assert not [e for e in null.effects if e in ("resistance_error", "dead_time", "torque_constant_error")], null.effects
+    assert not [e for e in null.effects
+                if e in ("resistance_error", "dead_time", "torque_constant_error")], null.effects

@@ -229,7 +229,8 @@ def v_dead_time(ctx, loc):
     for f in DEAD_TIME_BANDS:
         b = f * ref
         key = f"dead_band@{b:.6g}"
-        out.append(Variant("dead_time", f"current band {b:.3g} A", {key: col_dead_band(b)}, hyper={"dead_time_current_band": b},
+        out.append(Variant("dead_time", f"current band {b:.3g} A", {key: col_dead_band(b)},
+                           hyper={"dead_time_current_band": b},
                            nonlinear={"dead_time_current_band": (b, max(0.02 * ref, b / 2.5),
                                                                  min(DEAD_TIME_BAND_MAX * ref, b * 2.5),
                                                lambda c, v, key=key: {key: col_dead_band(v)})}))

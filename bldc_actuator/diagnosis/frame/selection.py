@@ -577,14 +577,16 @@ def name_unexcited(ctx: Context, sel: SelectionResult, alias: dict[str, Any]) ->
     for k in old.added:
         sel.iterating.pop(k, None)
     ho = alias["heldout"]
-    sel.accepted[i] = Accepted(y, v, list(added), old.round, old.dbic, heldout_test(ctx, sel.base_fit, f, sel.weights),
+    sel.accepted[i] = Accepted(y, v, list(added), old.round, delta_bic(sel.base_fit, f),
+                               heldout_test(ctx, sel.base_fit, f, sel.weights),
                                evidence=[f"in place of {x}: the data separate them (training ΔBIC "
                                          f"{alias['delta_bic_common']:+.1f} for {y}, held-out {-100 * ho['rel']:+.1f} % "
                                          f"RMS against {x}, t = {ho['t']:.1f})"])
     sel.final_fit = f
     sel.not_checkable = [nc for nc in sel.not_checkable if nc.get("effect") != y]
     sel.rejected.append({"effect": x, "form": old.variant.label,
-                         "reason": f"{y} explains the same residual better: training ΔBIC {alias['delta_bic_common']:+.1f} "
+                         "reason": f"{y} explains the same residual better: training ΔBIC "
+                                   f"{alias['delta_bic_common']:+.1f} "
                                    f"for {y} (at the smaller effective sample count), held-out error "
                                    f"{-100 * ho['rel']:+.1f} % RMS against {x} (t = {ho['t']:.1f}); {y} was set aside "
                                    f"first ({alias['why']}), but this recording separates them"})
