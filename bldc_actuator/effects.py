@@ -144,7 +144,7 @@ def phase_current_measurement(i_a, i_b, offset_a, offset_b, gain_a, gain_b):
 
 # -- inverter dead time ------------------------------------------------------------------------------
 
-def dead_time_winding_error(i_a, i_b, i_c, di_a, di_b, di_c, dead_time_voltage, delta, leg_gain):
+def dead_time_winding_error(i_a, i_b, i_c, di_a, di_b, di_c, dead_time_voltage, delta, leg_gain, band=0.0):
     """Voltage error each winding receives from the inverter's dead time [V], averaged over an interval, from the
     winding currents ``i_a, i_b, i_c`` [A] at its start and the change ``di_*`` [A] the other voltages would
     make over it (``delta`` non-zero for a delta winding, zero for wye).
@@ -157,10 +157,18 @@ def dead_time_winding_error(i_a, i_b, i_c, di_a, di_b, di_c, dead_time_voltage, 
     legs' errors, ``Δv_a = e_A - e_B``, ``Δv_b = e_B - e_C``, ``Δv_c = e_C - e_A`` (summing to zero round the
     loop: no circulating current).
 
+    ``band`` [A] > 0: within a switching period a line current smaller than its ripple (or than the current
+    loop's sample-to-sample chatter) changes sign, and the leg's error averages to a value proportional to the
+    current: ``e_K = -V_dt clip(i_K / band, -1, 1)`` (linear inside the band, the full ``V_dt`` outside).
+    ``band = 0``: the ideal sign.
+
     Over a finite interval (``leg_gain`` [A/V] > 0: the change of a line current per volt of its own leg's
-    error over the interval) a line current that would cross zero under the full error is clamped there (the
-    Filippov average of the sign): the leg's error is only what brings ``i_K + di_K`` to zero, at most
-    ``V_dt``. A current that stays on its side gets the full ``-V_dt sign(i_K)``. ``leg_gain = 0``: the sign."""
+    error over the interval) the error is taken at the interval's end, where it is stable for any interval:
+    band 0: a line current that would cross zero under the full error is clamped there (the Filippov average of
+    the sign): the leg's error is only what brings ``i_K + di_K`` to zero, at most ``V_dt``; a current that stays
+    on its side gets the full ``-V_dt sign(i_K)``. Band > 0: ``e = -V_dt clip((i_K + di_K + leg_gain e)/band)``,
+    i.e. ``-V_dt x / (band + V_dt leg_gain)`` for ``|x| = |i_K + di_K| <= band + V_dt leg_gain``, else the full
+    error; ``band`` -> 0 gives the clamp. ``leg_gain = 0``: the error at the start current."""
     if delta:
         i_A, i_B, i_C = i_a - i_c, i_b - i_a, i_c - i_b
         d_A, d_B, d_C = di_a - di_c, di_b - di_a, di_c - di_b
@@ -168,14 +176,20 @@ def dead_time_winding_error(i_a, i_b, i_c, di_a, di_b, di_c, dead_time_voltage, 
         i_A, i_B, i_C = i_a + 0.0, i_b + 0.0, i_c + 0.0
         d_A, d_B, d_C = di_a + 0.0, di_b + 0.0, di_c + 0.0
     V = dead_time_voltage
-    e_A, e_B, e_C = -V * np.sign(i_A), -V * np.sign(i_B), -V * np.sign(i_C)
-    if leg_gain > 0.0:
-        # crosses (or starts at) zero under the full error -> the error that ends it at zero, within +-V_dt
-        x_A, x_B, x_C = (i_A + d_A + leg_gain * e_A) * e_A >= 0.0, (i_B + d_B + leg_gain * e_B) * e_B >= 0.0, \
-            (i_C + d_C + leg_gain * e_C) * e_C >= 0.0
-        e_A = e_A + x_A * (np.minimum(np.maximum(-(i_A + d_A) / leg_gain, -V), V) - e_A)
-        e_B = e_B + x_B * (np.minimum(np.maximum(-(i_B + d_B) / leg_gain, -V), V) - e_B)
-        e_C = e_C + x_C * (np.minimum(np.maximum(-(i_C + d_C) / leg_gain, -V), V) - e_C)
+    if band > 0.0:
+        s = band + V * leg_gain
+        e_A = -V * np.minimum(np.maximum((i_A + d_A) / s, -1.0), 1.0)
+        e_B = -V * np.minimum(np.maximum((i_B + d_B) / s, -1.0), 1.0)
+        e_C = -V * np.minimum(np.maximum((i_C + d_C) / s, -1.0), 1.0)
+    else:
+        e_A, e_B, e_C = -V * np.sign(i_A), -V * np.sign(i_B), -V * np.sign(i_C)
+        if leg_gain > 0.0:
+            # crosses (or starts at) zero under the full error -> the error that ends it at zero, within +-V_dt
+            x_A, x_B, x_C = (i_A + d_A + leg_gain * e_A) * e_A >= 0.0, (i_B + d_B + leg_gain * e_B) * e_B >= 0.0, \
+                (i_C + d_C + leg_gain * e_C) * e_C >= 0.0
+            e_A = e_A + x_A * (np.minimum(np.maximum(-(i_A + d_A) / leg_gain, -V), V) - e_A)
+            e_B = e_B + x_B * (np.minimum(np.maximum(-(i_B + d_B) / leg_gain, -V), V) - e_B)
+            e_C = e_C + x_C * (np.minimum(np.maximum(-(i_C + d_C) / leg_gain, -V), V) - e_C)
     if delta:
         return e_A - e_B, e_B - e_C, e_C - e_A
     return e_A, e_B, e_C

@@ -47,6 +47,7 @@ _COEF_SCALARS = (
     "tau_c", "tau_asym", "tau_s", "omega_s", "cog_order", "load0", "load_g", "load_phi", "load_k", "load_k0",
     "has_alpha", "has_beta", "has_stribeck", "has_friction", "has_position_load", "k_sat",
     "fe_h", "fe_e", "sens_off_a", "sens_off_b", "sens_gain_a", "sens_gain_b", "has_sensor_error", "v_dt", "dt_delta",
+    "dt_band",
     "v_lim_mode", "I_fw", "R_ctl", "L_ctl", "K_ctl",
     # transmission (gear.*, output side): stiffness, damping, load inertia, half the backlash; has_compliance 0 = rigid
     "k_tr", "c_tr", "J_l", "bl_half", "has_compliance",
@@ -173,7 +174,7 @@ def measured_current_dq(i_d, i_q, theta_e, off_a, off_b, gain_a, gain_b):
 
 
 @jit
-def dead_time_error_dq(i, di, theta_e, v_dt, delta, h_over_L):
+def dead_time_error_dq(i, di, theta_e, v_dt, delta, h_over_L, band=0.0):
     """d-q voltage error [V] the inverter's dead time puts on the windings over an interval, for winding current
     ``i`` at its start (complex, power-invariant d-q [A]) and the change ``di`` [A] the other voltages would make
     over it, at the electrical angle ``theta_e``: each leg short by ``v_dt`` against its line current, reaching
@@ -184,11 +185,13 @@ def dead_time_error_dq(i, di, theta_e, v_dt, delta, h_over_L):
     current by ``(2/3) k h e / L`` (k = 1 wye, 3 delta: a delta line current is fed by two windings, each seeing
     two legs), which decides whether the current crosses zero within the interval and is clamped there. Taking
     the sign at the interval's start instead made the current chatter by several amperes tick to tick on a
-    low-inductance delta motor (the error pushed it through zero and back)."""
+    low-inductance delta motor (the error pushed it through zero and back). ``band`` [A]: the line current below
+    which a leg's error is proportional to its current (the switching ripple; 0 = the ideal sign), see
+    :func:`effects.dead_time_winding_error`."""
     a, b, c_ = _dq_to_abc(i.real, i.imag, theta_e)
     da, db, dc = _dq_to_abc(di.real, di.imag, theta_e)
     gain = (2.0 / 3.0) * (3.0 if delta else 1.0) * h_over_L
-    w_a, w_b, w_c = _dead_time_winding_error(a, b, c_, da, db, dc, v_dt, delta, gain)
+    w_a, w_b, w_c = _dead_time_winding_error(a, b, c_, da, db, dc, v_dt, delta, gain, band)
     e_d, e_q = _abc_to_dq(w_a, w_b, w_c, theta_e)
     return e_d + 1j * e_q
 
@@ -423,7 +426,7 @@ def advance(c, s, h_ns):
     i0, w0, th0, v = s.i, s.omega, s.theta, s.v
     if c.v_dt != 0.0:   # the inverter's dead time: what reaches the winding, from the currents at the start
         di = (h / c.L) * (v - (c.R_ref + 1j * c.pole_pairs * w0 * c.L) * i0 - 1j * c.K_ref * w0)  # Euler predictor
-        v = v + dead_time_error_dq(i0, di, c.pole_pairs * th0, c.v_dt, c.dt_delta, h / c.L)
+        v = v + dead_time_error_dq(i0, di, c.pole_pairs * th0, c.v_dt, c.dt_delta, h / c.L, c.dt_band)
     R = _resistance_at(c.R_ref, s.T_w, c.T_ref, c.alpha, True) if c.has_alpha != 0.0 else c.R_ref
     K = c.K_ref * _flux_factor(s.T_h, c.T_ref, c.beta, True) if c.has_beta != 0.0 else c.K_ref  # magnet at T_h
     if c.k_sat != 0.0:   # cross-saturation by the q current at the interval start: torque and back-EMF alike

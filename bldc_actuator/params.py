@@ -125,6 +125,10 @@ class DriveParams:
                           "t_d f_pwm V_bus against its line current (wye or delta)", 0.0, 1e-5)
     pwm_frequency: float = _p(20000.0, "Hz", "PWM switching frequency f_pwm (sets the dead-time voltage)",
                               1000.0, 200000.0)
+    dead_time_current_band: float = _p(0.0, "A", "line current below which a leg's dead-time error is "
+                                       "proportional to the current (the switching ripple, or the current loop's "
+                                       "sample-to-sample chatter, reverses it within a period): -V_dt clip(i/band, "
+                                       "-1, 1); 0 = the ideal sign", 0.0, 100.0)
     current_loop_delay: float = _p(0.0, "s", "computation delay: the voltage computed from the sample at a "
                                    "controller tick is applied this long after it (0 .. one loop period)",
                                    0.0, 1e-3)

@@ -54,3 +54,22 @@ def test_a_resistance_error_the_training_data_separates_from_the_offset_has_no_s
     assert f["parameters"]["phase_resistance"] == pytest.approx(truth.motor.phase_resistance, rel=0.03)
     assert not [a for a in rep["aliases"] if "dead_time" in a["effects"]]
     assert "dead_time" not in rep["verdict"]
+
+
+def test_dead_time_under_a_one_signed_current_the_data_separate_is_named_in_place_of_the_resistance():
+    """2 µs dead time under the load, larger swings (one-signed current): the offset fits the training data better
+    than ``R i`` by far more than the BIC threshold at the smaller effective sample count, and the held-out part
+    agrees: dead_time is named (2 µs within 5 %) in the resistance's place, the resistance listed as rejected,
+    no alias (motulator's tp_dead_time_loaded was reported "not decidable which" with a training ΔBIC of +8.5 for
+    the offset at ITS residual's sample count). The equation-error decision only: the simulated judge refuses this
+    finding here ("worsens the simulated velocity", voltage error 1.47 -> 0.078 V), a judge matter."""
+    truth = NOMINAL.replace(**{"drive.dead_time": 2e-6})
+    sig = closed_loop_recording(truth, NOMINAL, _reference(2.0), duration=12.0, seed=1)
+    assert np.percentile(sig.channels["current"], 0.5) > 0.0
+    rep = diagnose(sig, NOMINAL, options=DiagnoseOptions(simulation_gate=False)).to_dict()
+    assert [f["effect"] for f in rep["findings"]] == ["dead_time"], \
+        [(r["effect"], r["reason"]) for r in rep["rejected"]]
+    f = rep["findings"][0]
+    assert f["parameters"]["dead_time"] == pytest.approx(2e-6, rel=0.05)
+    assert not [a for a in rep["aliases"] if "dead_time" in a["effects"]]
+    assert any(r["effect"] == "resistance_error" and "separates them" in r["reason"] for r in rep["rejected"])

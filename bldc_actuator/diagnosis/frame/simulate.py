@@ -154,6 +154,9 @@ def effect_parameters(ctx: Context, sel: SelectionResult, ff: FinalFit, lib: dic
         for name, info in ff.nonlinear.get(a.effect, {}).items():
             if name.endswith("_sd") or name.endswith("_corr_amplitude"):
                 continue
+            if name in pars:     # mapped by the candidate itself (e.g. the dead time's current band): its sd
+                pars[name]["sd"] = ff.nonlinear[a.effect].get(name + "_sd", float("nan"))
+                continue
             fld = "effects.stribeck_velocity" if name == "omega_s" else None
             pars["stribeck_velocity" if name == "omega_s" else name] = {
                 "value": info, "sd": ff.nonlinear[a.effect].get(name + "_sd", float("nan")),
@@ -750,9 +753,10 @@ def window_start(plist: list[ActuatorParams], i_d_meas, i_q_meas, omega, theta, 
             delta = 1.0 if m.winding == "delta" else 0.0
             h_over_L = 1.0 / (d.current_loop_rate * m.q_inductance)
             v_pred = (m.phase_resistance + 1j * m.pole_pairs * w * m.q_inductance) * i + 1j * m.torque_constant_q * w
-            e = kernel.dead_time_error_dq(i, 0j, th_e, v_dt, delta, 0.0)
+            band = d.dead_time_current_band
+            e = kernel.dead_time_error_dq(i, 0j, th_e, v_dt, delta, 0.0, band)
             v_try = kernel.limit_voltage(v_plant - e, v_max, mode)
-            e = kernel.dead_time_error_dq(i, h_over_L * (v_try - v_pred), th_e, v_dt, delta, h_over_L)
+            e = kernel.dead_time_error_dq(i, h_over_L * (v_try - v_pred), th_e, v_dt, delta, h_over_L, band)
             v_plant = v_plant - e
         v_app = kernel.limit_voltage(v_plant, v_max, mode)
         # the feed-forward acts on the MEASURED current with the drive's own model of the motor (its L and

@@ -21,7 +21,7 @@ from ..frame import simulate as refit
 from . import drive_modes
 from . import simulated as judge
 from ..frame.candidates import SPECIAL
-from ..frame.selection import forward_select, unexcited_aliases
+from ..frame.selection import forward_select, name_unexcited, unexcited_aliases
 from ..records import Judgement, Say, Search
 
 #: simulated verdicts that keep a finding ("not simulated" does not: with the gate on, a finding the simulated
@@ -82,6 +82,12 @@ def _unexcited_aliases(s: Search, sel, options, say: Say) -> None:
     thr = options.gate.bic_threshold
     for al in unexcited_aliases(s.ctx, s.located, s.lib, sel, options.gate):
         x, y = al["effects"]
+        if al.get("separated") == y and any(a.effect == x for a in sel.accepted):
+            name_unexcited(s.ctx, sel, al)
+            say(f"4/6 attribute: {x} ~ {y} ({y} not checkable here): the data separate them in favour of {y} "
+                f"(training ΔBIC {al['delta_bic_common']:+.1f}, held-out {-100 * al['heldout']['rel']:+.1f} % RMS, "
+                f"t = {al['heldout']['t']:.1f}): {y} takes {x}'s place")
+            continue
         if al["delta_bic"] < -thr:
             say(f"4/6 attribute: {x} ~ {y} ({y} not checkable here): the training data separates them (ΔBIC "
                 f"{al['delta_bic']:+.1f} for {y})")

@@ -1,0 +1,67 @@
+"""The logged voltage acts later in a turned frame (issue #14, third-party set: motulator's drive).
+
+A drive computes its d/q voltage in the rotor frame of the sampling instant; its PWM holds it in stator
+coordinates and applies it a computation delay later, so unless the drive advances its angle the winding gets
+``v e^{-j p ω d}``. The q equation of a 1 kHz log then keeps ``p ω d v_d`` (motulator: -0.26 mV/(rad/s) of
+apparent back-EMF, a 0.1 s correlation time in the residual) and a 40 % resistance error stayed hidden. The delay
+is read from the d-axis equation (:func:`equation_error.frame_delay`), where the turned back-EMF is the largest
+term, and the q equation uses the voltage turned back by it. Recordings from the project's closed-loop actuator
+(which holds its voltage in rotor coordinates: no turn) whose logged voltages are turned forward by ``p ω d``, as
+such a drive logs them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bldc_actuator.diagnosis.frame import equation_error as ee
+from bldc_actuator.diagnosis.pipeline import DiagnoseOptions, diagnose
+from bldc_actuator.params import ActuatorParams
+
+from test_issue14_judge_helpers import closed_loop_recording
+
+NOMINAL = ActuatorParams().replace(**{"gear.gear_ratio": 9.0, "drive.current_loop_rate": 10000.0,
+                                      "motor.rotor_inertia": 5 * ActuatorParams().motor.rotor_inertia})
+D = 1.5e-4      # [s] 1.5 loop periods: one period of computation delay plus half the held period
+
+
+def _logged_by_a_turning_drive(sig, p: ActuatorParams, d: float):
+    """The same recording as a drive that logs its voltage in the frame of the sampling instant would: the applied
+    d/q voltage turned forward by p ω d."""
+    ch = sig.channels
+    v = (ch["voltage_d"] + 1j * ch["voltage_q"]) * np.exp(1j * p.motor.pole_pairs * ch["velocity"] * d)
+    ch["voltage_d"], ch["voltage_q"] = v.real, v.imag
+    return sig
+
+
+def _recording(truth, seed, d=D):
+    ph = 0.7 * seed
+
+    def reference(t):
+        return (6 * np.sin(2 * np.pi * 0.3 * t + ph) + 2.5 * np.sin(2 * np.pi * 1.3 * t)
+                + 1.2 * np.sin(2 * np.pi * 4.7 * t) + 0.4 * np.sin(2 * np.pi * 9.1 * t + ph))
+
+    sig = closed_loop_recording(truth, NOMINAL, reference, duration=8.0, rate=1000.0, seed=seed)
+    return _logged_by_a_turning_drive(sig, truth, d) if d else sig
+
+
+def test_the_frame_delay_is_read_from_the_d_axis_and_only_where_there_is_one():
+    truth = NOMINAL.replace(**{"motor.phase_resistance": 1.4 * NOMINAL.motor.phase_resistance})
+    ctx = ee.prepare([(_recording(truth, 1), False)], NOMINAL, fc=None, holdout=0.3)
+    d, sd = ee.frame_delay(ctx)
+    assert d == pytest.approx(D, rel=0.05) and sd < 0.05 * D
+    ctx0 = ee.prepare([(_recording(truth, 1, d=0.0), False)], NOMINAL, fc=None, holdout=0.3)
+    assert ee.frame_delay(ctx0) is None          # a drive that turns nothing: no correction
+
+
+def test_a_resistance_error_behind_a_turning_drive_is_found_and_sized():
+    """R x 1.4 behind the turned log: named and sized within 2.5 % (1.5 % low; read without the turn it was 4.5 %
+    low); with the same logs of the nominal motor nothing is named (the turn alone is no effect)."""
+    truth = NOMINAL.replace(**{"motor.phase_resistance": 1.4 * NOMINAL.motor.phase_resistance})
+    rep = diagnose(_recording(truth, 1), NOMINAL, options=DiagnoseOptions(holdout_signals=_recording(truth, 2)))
+    assert "resistance_error" in rep.effects, (rep.effects, [(r["effect"], r["reason"]) for r in rep.rejected])
+    assert rep.updated_params.motor.phase_resistance == pytest.approx(truth.motor.phase_resistance, rel=0.025)
+    null = diagnose(_recording(NOMINAL, 3), NOMINAL, options=DiagnoseOptions(holdout_signals=_recording(NOMINAL, 4)))
+    assert not [e for e in null.effects
+                if e in ("resistance_error", "dead_time", "torque_constant_error")], null.effects
