@@ -167,3 +167,29 @@ def test_complex_vector_follows_motulators_current(motulator_run):
     print(f"i_q RMS against motulator: complex_vector {1e3 * cv:.3f} mA, pi {1e3 * pi:.3f} mA")
     assert cv < 5e-4, (cv, pi)
     assert pi > 2 * cv, (cv, pi)
+
+
+@pytest.mark.parametrize("decouple", [False, True])
+def test_the_replay_window_starts_in_the_complex_vector_drives_own_steady_state(decouple):
+    """``frame.simulate.window_start`` holds the complex-vector drive's steady integrator
+    (v cos(phi) + K_p i - v_ff) at a recorded state, with the drive's model of the motor differing from the
+    motor's (K x1.15 in the motor, the drive on the nominal)."""
+    from bldc_actuator.diagnosis.frame import simulate as frame_sim
+
+    nom = BASE.replace(**{"motor.resistance_temperature_enabled": False, "drive.current_controller": "complex_vector",
+                          "drive.decoupling_enabled": decouple, "drive.current_loop_delay": 1e-4})
+    m = nom.motor
+    true = nom.replace(**{"motor.torque_constant_q": 1.15 * m.torque_constant_q,
+                          "drive.controller_resistance": m.phase_resistance,
+                          "drive.controller_inductance": m.q_inductance,
+                          "drive.controller_torque_constant": m.torque_constant_q})
+    act = Actuator(true)
+    act.set_current_command(3.0)
+    for _ in range(800):                          # with the feed-forward a slow mode settles over ~0.5 s
+        act.prescribe_motion(60.0)
+        act.step(1e-3)
+    s = act.state
+    assert abs(s.i_q - 3.0) > 1e-4                # the complex-vector deficit is there
+    ws = frame_sim.window_start([true], [s.i_d], [s.i_q], [s.omega], [s.theta], [s.T_winding], [s.T_housing])
+    assert ws.z[0] == pytest.approx(complex(s.z_d, s.z_q), abs=1e-6)
+    assert ws.v[0] == pytest.approx(complex(s.v_d, s.v_q), abs=1e-6)
