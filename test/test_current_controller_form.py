@@ -16,7 +16,12 @@ import pytest
 from bldc_actuator.model import Actuator
 from bldc_actuator.params import ActuatorParams, ParameterError
 
-DATA = Path(__file__).resolve().parent / "data" / "pi_default_trace_3d1290a.npz"
+from bldc_actuator.kernel import COMPILED
+
+#: the default drive's trace written by commit 3d1290a (before the option), on each kernel path (numba calls libm,
+#: numpy its own exp/sin: the paths differ in the last bit, docs/physics.md)
+DATA = Path(__file__).resolve().parent / "data" / ("pi_default_trace_3d1290a.npz" if COMPILED
+                                                   else "pi_default_trace_3d1290a_python.npz")
 BASE = ActuatorParams().replace(**{"gear.gear_ratio": 9.0})
 TRACE_CASES = {
     "default": {},
