@@ -245,7 +245,10 @@ def control_tick(c, s):
       coordinates and rotated back by the present angle), ``z += T_c (a + j p ω) (u - v_dist)``. The limited
       voltage drives the integrator (its anti-windup); ``K_i`` is not used (integral bandwidth = ``a``). In the
       steady state ``u = v cos(phi)``, so the current settles short of its reference by
-      ``(1 - cos(phi)) |v| / (a L_ctl)``."""
+      ``(1 - cos(phi)) |v| / (a L_ctl)``. ``v_ongoing`` is the voltage held when the tick runs (with a whole
+      period of delay, motulator's, the one computed at the previous tick; without delay the new one; a partial
+      delay takes the one still held at the tick), ``v_prev`` the one held over the period before (``s.v_prev``).
+      The field-weakening regulator and the voltage-limit modes act as in ``pi``."""
     if s.v_mode:
         mag = abs(s.v_cmd)
         s.v_next = s.v_cmd * (c.V_max / mag) if mag > c.V_max else s.v_cmd

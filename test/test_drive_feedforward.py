@@ -210,3 +210,20 @@ def test_identify_names_the_current_controller_form(truth, file):
         r = drive_feedforward.identify(ctx, rec_p, refit.windows(ctx, 0.1, 60, "train"),
                                        refit.windows(ctx, 0.1, 60, "holdout"), 0.1)
         assert not r["findings"] and "reproduces the recorded current best" in r["rejected"][0]["reason"]
+
+
+def test_the_updated_file_names_the_identified_form():
+    """The whole diagnosis on a complex-vector drive (no feed-forward) behind a file saying pi with feed-forward:
+    the drive finding names the form, the updated parameter set carries both fields, and its closed-loop replay
+    follows the held-out speed better than the file's drive."""
+    base = FILE.replace(**{"drive.current_loop_delay": 1e-4, "drive.current_loop_bandwidth": 250.0,
+                           "motor.viscous_damping": 1e-2})
+    truth = base.replace(**{"drive.current_controller": "complex_vector", "drive.decoupling_enabled": False})
+    nominal = base.replace(**{"drive.current_controller": "pi", "drive.decoupling_enabled": True})
+    rep = diagnose(steps_recording(truth, duration=8.0, seed=8), nominal)
+    d = rep.to_dict()
+    assert drive_feedforward.EFFECT in {f["effect"] for f in d["findings"]}, d["verdict"]
+    up = rep.updated_params
+    assert (up.drive.current_controller, up.drive.decoupling_enabled) == ("complex_vector", False)
+    ho = d["compare"]["replay"]["holdout"]
+    assert ho["after"]["velocity_rms"] < 0.5 * ho["before"]["velocity_rms"]
