@@ -49,6 +49,8 @@ _COEF_SCALARS = (
     "fe_h", "fe_e", "sens_off_a", "sens_off_b", "sens_gain_a", "sens_gain_b", "has_sensor_error", "v_dt", "dt_delta",
     "dt_band",
     "v_lim_mode", "I_fw", "R_ctl", "L_ctl", "K_ctl",
+    # the current controller's form (drive.current_controller, see CURRENT_CONTROLLERS): 0 pi, 1 complex_vector
+    "cc_form",
     # transmission (gear.*, output side): stiffness, damping, load inertia, half the backlash; has_compliance 0 = rigid
     "k_tr", "c_tr", "J_l", "bl_half", "has_compliance",
 )
@@ -72,10 +74,14 @@ STATE_DTYPE = np.dtype([
     # the load behind a compliant transmission (output side; unused when rigid): angle [rad], speed [rad/s];
     # an external torque at the rotor [N*m, motor side]; the transmission damping's dissipation [J]
     ("theta_l", np.float64), ("omega_l", np.float64), ("tau_ext_m", np.float64), ("e_tdamp", np.float64),
+    # the voltage applied over the previous controller period (d-q [V]; the complex-vector form's realized voltage)
+    ("v_prev", np.complex128),
 ], align=True)
 
 #: ``drive.voltage_limit_mode`` -> the kernel's ``v_lim_mode`` code
 VOLTAGE_LIMIT_MODES = ("proportional", "d_priority", "q_priority", "field_weakening")
+#: ``drive.current_controller`` -> the kernel's ``cc_form`` code
+CURRENT_CONTROLLERS = ("pi", "complex_vector")
 #: the field-weakening regulator keeps |v| below this fraction of the circle, and runs at this fraction of
 #: the current-loop bandwidth
 FW_VOLTAGE_MARGIN = 0.95
@@ -226,13 +232,30 @@ def control_tick(c, s):
     """One execution of the discrete d/q PI current controller: the voltage ``s.v_next`` it computes from the
     sample is applied ``c.delay_ns`` later (at once without a computation delay) and held until the next one.
     Thermal protection first: the trip latches at ``T_trip``. In voltage mode (``s.v_mode``) the PI is
-    bypassed and the commanded voltage is applied (limited to the inverter's circle)."""
+    bypassed and the commanded voltage is applied (limited to the inverter's circle).
+
+    Two forms (``c.cc_form``, ``drive.current_controller``):
+
+    * 0 ``pi``: ``v = lim(K_p e + z + v_ff)``, ``z += K_i T_c e + (v - v_unlimited)`` (back-calculation).
+    * 1 ``complex_vector``: the 2DOF synchronous-frame complex-vector PI (Briz, Degner, Lorenz 2000) with the
+      integrator driven by the REALIZED voltage, as motulator's ``CurrentVectorController`` runs it:
+      ``a = K_p / L_ctl`` (the loop bandwidth), disturbance estimate ``v_dist = z - K_p i + v_ff``,
+      ``v = lim(K_p e + v_dist)``, realized voltage ``u = (v_ongoing e^{+j phi} + v_prev e^{-j phi}) / 2`` with
+      ``phi = p ω T_c / 2`` (the mean of the ongoing and the previous period's voltage, taken in stationary
+      coordinates and rotated back by the present angle), ``z += T_c (a + j p ω) (u - v_dist)``. The limited
+      voltage drives the integrator (its anti-windup); ``K_i`` is not used (integral bandwidth = ``a``). In the
+      steady state ``u = v cos(phi)``, so the current settles short of its reference by
+      ``(1 - cos(phi)) |v| / (a L_ctl)``. ``v_ongoing`` is the voltage held when the tick runs (with a whole
+      period of delay, motulator's, the one computed at the previous tick; without delay the new one; a partial
+      delay takes the one still held at the tick), ``v_prev`` the one held over the period before (``s.v_prev``).
+      The field-weakening regulator and the voltage-limit modes act as in ``pi``."""
     if s.v_mode:
         mag = abs(s.v_cmd)
         s.v_next = s.v_cmd * (c.V_max / mag) if mag > c.V_max else s.v_cmd
         s.i_ref = 0.0
         if c.delay_ns == 0:
             s.v = s.v_next
+        s.v_prev = s.v
         return
     s.tripped = s.tripped or s.T_w >= c.T_trip
     lim = current_limit(c, s)
@@ -252,7 +275,12 @@ def control_tick(c, s):
     if c.decouple != 0.0:
         # with the drive's own model of the motor (drive.controller_*), not the true L and K
         v_ff = 1j * (c.pole_pairs * s.omega * c.L_ctl * i + c.K_ctl * s.omega)
-    v_pi = c.Kp * err + s.z + v_ff
+    v_dist = 0j
+    if c.cc_form == 1.0:                                       # complex_vector: disturbance estimate
+        v_dist = s.z - c.Kp * i + v_ff
+        v_pi = c.Kp * err + v_dist
+    else:
+        v_pi = c.Kp * err + s.z + v_ff
     v = limit_voltage(v_pi, c.V_max, c.v_lim_mode)
     if c.v_lim_mode == 3.0 and c.I_fw > 0.0:
         # field-weakening regulator: integrate the voltage demand's excess over the margin into a negative
@@ -263,7 +291,15 @@ def control_tick(c, s):
     s.v_next = v                                               # applied after the computation delay
     if c.delay_ns == 0:
         s.v = v
-    s.z = s.z + c.Ki * c.T_c * err + (v - v_pi)               # back-calculation anti-windup
+    if c.cc_form == 1.0:
+        # the realized voltage of the previous and the ongoing periods, rotated back by the present angle
+        w_e = c.pole_pairs * s.omega
+        rot = cmath.exp(0.5j * c.T_c * w_e)
+        u_real = 0.5 * (s.v * rot + s.v_prev / rot)
+        s.z = s.z + c.T_c * (c.Kp / c.L_ctl + 1j * w_e) * (u_real - v_dist)
+        s.v_prev = s.v
+    else:
+        s.z = s.z + c.Ki * c.T_c * err + (v - v_pi)           # back-calculation anti-windup
 
 
 @jit

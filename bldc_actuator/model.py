@@ -9,7 +9,9 @@ Continuous-time plant (motor side, power-invariant d-q of the winding quantities
     C_h dT_h/dt = (T_w - T_h)/R_wh - (T_h - T_a)/R_ha                  [W]
 
 Drive: a discrete PI current controller (d and q, pole-zero cancelling gains, decoupling feed-forward,
-back-calculation anti-windup) runs at ``drive.current_loop_rate``; its voltage, limited to the circle
+back-calculation anti-windup; or, ``drive.current_controller: complex_vector``, motulator's 2DOF complex-vector PI
+with its realized-voltage integrator, see :func:`bldc_actuator.kernel.control_tick`) runs at
+``drive.current_loop_rate``; its voltage, limited to the circle
 the SVPWM inverter can make (:func:`frames.voltage_limit_q`), is held until the next tick.
 
 Integration over each interval ``h`` between controller ticks (or shorter, when ``step(dt)`` asks):
@@ -150,6 +152,7 @@ class _Coeffs:
         self.Kp = w_c * self.L_ctl
         self.Ki = w_c * self.R_ctl
         self.decouple = d("decoupling_enabled")
+        self.cc_form = col(lambda p: kernel.CURRENT_CONTROLLERS.index(p.drive.current_controller))
         self.v_lim_mode = col(lambda p: kernel.VOLTAGE_LIMIT_MODES.index(p.drive.voltage_limit_mode))
         self.I_fw = d("field_weakening_current_max")
         self.T_derate = d("derate_temperature")
@@ -255,7 +258,7 @@ class ActuatorState:
     T_housing: float = 25.0     #: housing temperature [degC]
     v_d: float = 0.0            #: applied d-axis voltage [V] (held since the last controller tick)
     v_q: float = 0.0            #: applied q-axis voltage [V]
-    z_d: float = 0.0            #: PI integrator, d [V]
+    z_d: float = 0.0            #: PI integrator, d [V] (complex_vector: its integrator u_i, see kernel.control_tick)
     z_q: float = 0.0            #: PI integrator, q [V]
     i_q_ref: float = 0.0        #: q-axis current reference after limits [A]
     tripped: bool = False       #: over-temperature trip (latched)
@@ -580,6 +583,7 @@ class Actuator(_Base):
         s("T_h", float(st.T_housing))
         s("v", complex(st.v_d, st.v_q))
         s("v_next", complex(st.v_d, st.v_q))
+        s("v_prev", complex(st.v_d, st.v_q))
         s("z", complex(st.z_d, st.z_q))
         s("i_ref", float(st.i_q_ref))
         s("tripped", bool(st.tripped))
@@ -720,6 +724,7 @@ class BatchActuator(_Base):
         s("T_h", arr(T_housing))
         s("v", arr(v_d) + 1j * arr(v_q))
         s("v_next", arr(v_d) + 1j * arr(v_q))
+        s("v_prev", arr(v_d) + 1j * arr(v_q))
         s("z", arr(z_d) + 1j * arr(z_q))
         s("i_ref", arr(i_q_ref))
         s("cmd_q", arr(i_q_ref))

@@ -99,7 +99,18 @@ class DriveParams:
                                   "sub-step (voltage is held between ticks)", 1000.0, 200000.0)
     current_loop_bandwidth: float = _p(1000.0, "Hz", "closed-loop bandwidth the PI gains are tuned for "
                                        "(K_p = 2 pi f L_q, K_i = 2 pi f R_phase)", 1.0, 20000.0)
-    decoupling_enabled: bool = _p(True, "", "feed-forward of the omega*L cross-coupling and back-EMF")
+    decoupling_enabled: bool = _p(True, "", "feed-forward of the omega*L cross-coupling and back-EMF, "
+                                  "j (p omega L_ctl i + K_ctl omega) [V], added to the PI output (pi) or to the "
+                                  "disturbance estimate (complex_vector: motulator's u_ff, which its "
+                                  "CurrentVectorController leaves at 0)")
+    current_controller: str = _p("pi", "", "the current controller's law: pi (d/q PI, K_p = 2 pi f L_q, K_i = 2 pi "
+                                 "f R_phase, back-calculation anti-windup) or complex_vector (2DOF complex-vector PI "
+                                 "as motulator's CurrentVectorController: active resistance and reference gain "
+                                 "a L_q with a = 2 pi f, integrator (a + j p omega)/s driven by the realized "
+                                 "voltage, the mean of the previous and ongoing periods' voltages rotated back by "
+                                 "the present angle; K_i unused; in the steady state the current falls short of "
+                                 "its reference by (1 - cos(p omega T_c/2)) |v| / (a L_q) [A])",
+                                 choices=("pi", "complex_vector"))
     controller_resistance: float = _p(0.0, "ohm", "R_phase the drive's current loop is tuned with (K_i = 2 pi f R): "
                                       "what the drive believes, not the motor's; 0 = motor.phase_resistance",
                                       0.0, 100.0)

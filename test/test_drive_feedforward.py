@@ -34,11 +34,13 @@ def _identify(truth_decoupling: bool, file_decoupling: bool, seed: int):
 def test_identify_names_the_recording_drive_feedforward(truth, file):
     r = _identify(truth, file, seed=3)
     (f,) = r["findings"]
-    assert f["updated_fields"] == {"drive.decoupling_enabled": truth} and r["updated_fields"] == f["updated_fields"]
+    assert f["updated_fields"] == {"drive.current_controller": "pi", "drive.decoupling_enabled": truth}
+    assert r["updated_fields"] == f["updated_fields"]
     s = f["simulation"]
     assert s["with"] < s["without"] - s["noise_floor"] and s["candidate"] is truth
     tr = s["training_current_error"]
     assert tr[drive_feedforward._label(truth)] < tr[drive_feedforward._label(file)]
+    assert tr[drive_feedforward._label(truth)] < tr[drive_feedforward._label(("complex_vector", False))]
 
 
 @pytest.mark.parametrize("decoupling", [True, False])
@@ -110,7 +112,7 @@ def test_the_first_pass_cannot_see_the_feed_forward_behind_an_unmodelled_coulomb
     second = drive_feedforward.identify(ctx, nominal.replace(**{"effects.coulomb_friction": 0.02}), tr, ho, 0.1,
                                         findings=("coulomb_friction",))
     (f,) = second["findings"]
-    assert f["updated_fields"] == {"drive.decoupling_enabled": False}
+    assert f["updated_fields"] == {"drive.current_controller": "pi", "drive.decoupling_enabled": False}
     s = f["simulation"]
     assert s["with"] < s["without"] - s["noise_floor"] and s["model_findings"] == ["coulomb_friction"]
     assert s["velocity_with"] < 0.1 * s["velocity_without"]
@@ -136,7 +138,7 @@ def test_a_missing_feed_forward_is_named_beside_a_coulomb_friction_the_file_lack
     dd = rep.finding(drive_feedforward.EFFECT)
     assert dd["simulation"]["model_findings"] == ["coulomb_friction"]
     assert any("first pass" in e for e in dd["evidence"])
-    assert sum("drive feed-forward" in n for n in d["notes"]) == 1       # the first pass's note replaced
+    assert sum("drive form" in n for n in d["notes"]) == 1       # the first pass's note replaced
     ctx = rep._internals["ctx"]
     starts = refit.windows(ctx, 0.1, 60, "holdout")
     found, file_drive = refit.replay(ctx, [up, up.replace(**{"drive.decoupling_enabled": True})], starts, 0.1)
@@ -178,3 +180,50 @@ def test_a_wrong_drive_neither_blocks_nor_distorts_the_torque_side_findings():
         assert sim["verdict"] == "confirmed" and sim["closed_loop_replay"]["verdict"] == "confirmed", e
     ho = d["compare"]["replay"]["holdout"]
     assert ho["after"]["velocity_rms"] < 0.01 * ho["before"]["velocity_rms"]
+
+
+@pytest.mark.parametrize("truth, file", [(("complex_vector", False), ("pi", True)),
+                                         (("complex_vector", False), ("pi", False)),
+                                         (("pi", False), ("complex_vector", False))])
+def test_identify_names_the_current_controller_form(truth, file):
+    """The complex-vector PI (motulator's: the integrator sees the realized voltage v cos(p ω T_c/2), no
+    feed-forward) against the plain PI with or without feed-forward: the closed-loop replay's current names the
+    recording's form, both ways, and nothing when the file says the complex-vector form rightly. A 250 Hz loop at
+    10 kHz with a one-period delay and viscous drag that keeps the steps below ~150 rad/s (21 pole pairs): the
+    complex-vector law's forward-Euler integrator (a + j p ω) T_c, as motulator runs it, loses stability when
+    p ω T_c and a T_c are not small (1 kHz loop: above ~60 rad/s here)."""
+    base = FILE.replace(**{"drive.current_loop_delay": 1e-4, "drive.current_loop_bandwidth": 250.0,
+                           "motor.viscous_damping": 1e-2})
+    rec_p = base.replace(**drive_feedforward.fields(truth))
+    nominal = base.replace(**drive_feedforward.fields(file))
+    ctx = ee.prepare([(steps_recording(rec_p, duration=8.0, seed=7), False)], nominal, fc=None, holdout=0.3)
+    r = drive_feedforward.identify(ctx, nominal, refit.windows(ctx, 0.1, 60, "train"),
+                                   refit.windows(ctx, 0.1, 60, "holdout"), 0.1)
+    (f,) = r["findings"]
+    assert f["updated_fields"] == drive_feedforward.fields(truth), r["simulation"]["training_current_error"]
+    assert f["parameters"]["drive_form"] == drive_feedforward._label(truth)
+    assert truth[0] in f["form"] and file[0] in f["form"]
+    s = f["simulation"]
+    assert s["with"] < s["without"] - s["noise_floor"]
+    # the file right about the complex-vector form: no finding
+    if truth == ("complex_vector", False):
+        r = drive_feedforward.identify(ctx, rec_p, refit.windows(ctx, 0.1, 60, "train"),
+                                       refit.windows(ctx, 0.1, 60, "holdout"), 0.1)
+        assert not r["findings"] and "reproduces the recorded current best" in r["rejected"][0]["reason"]
+
+
+def test_the_updated_file_names_the_identified_form():
+    """The whole diagnosis on a complex-vector drive (no feed-forward) behind a file saying pi with feed-forward:
+    the drive finding names the form, the updated parameter set carries both fields, and its closed-loop replay
+    follows the held-out speed better than the file's drive."""
+    base = FILE.replace(**{"drive.current_loop_delay": 1e-4, "drive.current_loop_bandwidth": 250.0,
+                           "motor.viscous_damping": 1e-2})
+    truth = base.replace(**{"drive.current_controller": "complex_vector", "drive.decoupling_enabled": False})
+    nominal = base.replace(**{"drive.current_controller": "pi", "drive.decoupling_enabled": True})
+    rep = diagnose(steps_recording(truth, duration=8.0, seed=8), nominal)
+    d = rep.to_dict()
+    assert drive_feedforward.EFFECT in {f["effect"] for f in d["findings"]}, d["verdict"]
+    up = rep.updated_params
+    assert (up.drive.current_controller, up.drive.decoupling_enabled) == ("complex_vector", False)
+    ho = d["compare"]["replay"]["holdout"]
+    assert ho["after"]["velocity_rms"] < 0.5 * ho["before"]["velocity_rms"]

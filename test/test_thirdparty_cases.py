@@ -185,20 +185,25 @@ def test_ensure_simulates_only_what_moved_and_rewrites_every_truth(tmp_path):
 
 
 def test_nominal_files_state_each_drive_as_it_is():
-    """motulator's current controller has no back-EMF feed-forward: the nominal file says so, except in the cases
-    that hide exactly that (their file claims the feed-forward; truth: drive_decoupling, flag false). The drive
-    written around GEM feeds the back-EMF and the cross-coupling forward: its file says true."""
+    """motulator's current controller is a complex-vector PI without back-EMF feed-forward: the nominal file says
+    so, except in the cases that hide exactly that (their file claims a d/q PI with the feed-forward; truth:
+    drive_decoupling, the form complex_vector without feed-forward). The drive written around GEM is a PI that
+    feeds the back-EMF and the cross-coupling forward: its file says pi, true."""
     for case in T.CASES:
-        flag = T.nominal_params(case).drive.decoupling_enabled
+        d = T.nominal_params(case).drive
         if "drive_decoupling" in case.effects:
-            assert flag is True and case.truth["drive_decoupling"] == {"decoupling_enabled": False}
+            assert (d.current_controller, d.decoupling_enabled) == ("pi", True)
+            assert case.truth["drive_decoupling"] == {"drive_form": "complex_vector without feed-forward",
+                                                      "current_controller": "complex_vector",
+                                                      "decoupling_enabled": False}
         else:
-            assert flag is False, case.name
+            assert (d.current_controller, d.decoupling_enabled) == ("complex_vector", False), case.name
     assert {c.name for c in T.CASES if "drive_decoupling" in c.effects} == {"tp_drive_ff", "tp_coulomb_drive_ff"}
     assert set(T.get_case("tp_coulomb_drive_ff").effects) == {"coulomb_friction", "drive_decoupling"}
     assert len({c.seed for c in T.CASES}) == len(T.CASES)          # every case its own seed
     for case in G.CASES:
         assert G.nominal_params(case).drive.decoupling_enabled is True
+        assert G.nominal_params(case).drive.current_controller == "pi"
         assert "drive_decoupling" not in case.effects
 
 
@@ -228,3 +233,20 @@ def test_scoring_counts_the_drive_decoupling_finding():
     # where the file is right about the drive, naming it is an extra / a false positive as before
     plain = {"case": "tp_null", "effects": [], "truth": {}}
     assert scoring.score_case(plain, {"findings": [finding]}, {}).false_positives == ["drive_decoupling"]
+
+
+def test_scoring_counts_the_drive_form_the_finding_names():
+    """The third-party drive cases' truth is the drive FORM (controller law + feed-forward): a finding that names
+    complex_vector without feed-forward is correct; one that only clears the feed-forward flag of a PI is not."""
+    truth = {"case": "tp_drive_ff", "effects": ["drive_decoupling"], "truth": {"drive_decoupling": T.DRIVE_TRUTH}}
+    right = {"effect": "drive_decoupling", "parameters": {"drive_form": "complex_vector without feed-forward",
+                                                         "current_controller": "complex_vector",
+                                                         "decoupling_enabled": False}}
+    composed = {"effect": "drive_decoupling", "parameters": {"current_controller": "complex_vector",
+                                                            "decoupling_enabled": False}}
+    flag_only = {"effect": "drive_decoupling", "parameters": {"decoupling_enabled": False}}
+    for f, ok in ((right, True), (composed, True), (flag_only, False)):
+        s = scoring.score_case(truth, {"findings": [f]}, {})
+        assert s.ok and not s.false_positives
+        (e,) = s.effects
+        assert e.parameter == "drive_form" and e.value_correct is ok, (f, e)

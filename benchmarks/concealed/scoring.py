@@ -73,6 +73,20 @@ def _get_bool(params: dict, *names: str) -> bool | None:
     return None
 
 
+def _drive_form(params: dict) -> str | None:
+    """The drive form a drive finding names: its ``drive_form`` string, else composed from its
+    ``current_controller`` (default pi) and ``decoupling_enabled`` flag, as ``"<controller> with|without
+    feed-forward"``."""
+    form = _get_str(params, "drive_form")
+    if form is not None:
+        return form
+    ff = _get_bool(params, "decoupling_enabled", "drive.decoupling_enabled")
+    if ff is None:
+        return None
+    ctl = _get_str(params, "current_controller", "drive.current_controller") or "pi"
+    return f"{ctl} {'with' if ff else 'without'} feed-forward"
+
+
 def _get_list(params: dict, *names: str) -> list | None:
     for name in names:
         for key, val in params.items():
@@ -162,6 +176,8 @@ EXTRACTORS = {
     "housing_to_ambient_resistance": lambda p, n: _get(p, "housing_to_ambient_resistance", "R_ha"),
     # the drive-side finding drive_decoupling (diagnosis/drive_feedforward.py): the flag it writes back
     "decoupling_enabled": lambda p, n: _get_bool(p, "decoupling_enabled", "drive.decoupling_enabled"),
+    # ... and the drive form it names (current controller + feed-forward), e.g. "complex_vector without feed-forward"
+    "drive_form": lambda p, n: _drive_form(p),
 }
 
 

@@ -17,10 +17,12 @@ commanded (limited) d/q voltage, the speed it measures, the encoder angle (14 bi
 at 1 kHz (every 10th control sample) or 10 kHz (every sample); some cases add a torque sensor on the load side.
 Sensor noise is added to the logged channels (the drive's own loop sees motulator's clean measurements).
 
-The drive's truth: motulator's ``CurrentVectorController`` adds NO back-EMF or cross-coupling feed-forward (its
-complex-vector PI integrator carries the back-EMF; see docs/benchmark.md), so the nominal file says
-``drive.decoupling_enabled: false``; the cases ``tp_drive_ff`` and ``tp_coulomb_drive_ff`` hide it (their file says
-``true``: the hidden drive-side effect ``drive_decoupling``).
+The drive's truth: motulator's ``CurrentVectorController`` is a 2DOF complex-vector PI whose integrator is driven by
+the realized voltage, and it adds NO back-EMF or cross-coupling feed-forward (the integrator carries the back-EMF;
+see docs/benchmark.md), so the nominal file says ``drive.current_controller: complex_vector`` and
+``drive.decoupling_enabled: false`` (this project's kernel runs that law: docs/physics.md); the cases
+``tp_drive_ff`` and ``tp_coulomb_drive_ff`` hide it (their file says ``pi`` with feed-forward: the hidden drive-side
+effect ``drive_decoupling``, scored on the drive form the finding names).
 
 The recordings are made by :mod:`.thirdparty_sim` from each case's :func:`recording_spec` and cached per case under
 that key (:mod:`.case_kit`); the truth and nominal files are written from the case definition on every run.
@@ -51,9 +53,13 @@ NOMINAL_BASE: dict = {
     "motor.resistance_temperature_enabled": False, "motor.magnet_temperature_enabled": False,
     "drive.bus_voltage": 24.0, "drive.current_limit": 20.0, "drive.current_loop_rate": 10000.0,
     "drive.current_loop_bandwidth": 500.0, "drive.current_loop_delay": 1.0e-4, "drive.pwm_frequency": 5000.0,
-    "drive.decoupling_enabled": False,
+    "drive.decoupling_enabled": False, "drive.current_controller": "complex_vector",
     "gear.gear_ratio": 1.0,
 }
+#: the drive form the truth's drive has, and what the drive cases' files say instead (diagnosis/drive_feedforward.py)
+TRUE_DRIVE_FORM = "complex_vector without feed-forward"
+FILE_DRIVE_FORM = {"drive.current_controller": "pi", "drive.decoupling_enabled": True}
+DRIVE_TRUTH = {"drive_form": TRUE_DRIVE_FORM, "current_controller": "complex_vector", "decoupling_enabled": False}
 TAU_M_MAX = 1.2              #: [N·m] the speed controller's torque limit
 
 
@@ -112,14 +118,16 @@ CASES: tuple[TPCase, ...] = (
     TPCase("tp_resistance_loaded", ("resistance_error",), "phase resistance 40 % above the nominal, under a known "
            "0.25 N·m load", {"resistance_error": {"phase_resistance": 0.182}}, plant={"R_s": 0.182, "tau_ext": 0.25},
            nominal={"load.load_torque": 0.25}, seed=12, channel="voltage_q"),
-    TPCase("tp_drive_ff", ("drive_decoupling",), "the parameter file says the drive feeds the back-EMF and the "
-           "cross-coupling forward (drive.decoupling_enabled: true); motulator's current controller does not (its "
-           "integrator carries the back-EMF); the plant is the nominal one",
-           {"drive_decoupling": {"decoupling_enabled": False}}, nominal={"drive.decoupling_enabled": True}, seed=13),
+    TPCase("tp_drive_ff", ("drive_decoupling",), "the parameter file says the drive is a d/q PI that feeds the "
+           "back-EMF and the cross-coupling forward (drive.current_controller: pi, drive.decoupling_enabled: true); "
+           "motulator's is a complex-vector PI without feed-forward (its integrator, driven by the realized "
+           "voltage, carries the back-EMF); the plant is the nominal one",
+           {"drive_decoupling": DRIVE_TRUTH}, nominal=FILE_DRIVE_FORM, seed=13),
     TPCase("tp_coulomb_drive_ff", ("coulomb_friction", "drive_decoupling"), "Coulomb-like load friction 0.02 N·m "
-           "(tanh, 0.05 rad/s) AND a parameter file that says the drive has back-EMF feed-forward (it has none)",
-           {"coulomb_friction": {"coulomb_friction": 0.02}, "drive_decoupling": {"decoupling_enabled": False}},
-           plant={"F_c": 0.02}, nominal={"drive.decoupling_enabled": True}, seed=14),
+           "(tanh, 0.05 rad/s) AND a parameter file that says the drive is a d/q PI with back-EMF feed-forward "
+           "(it is motulator's complex-vector PI, without feed-forward)",
+           {"coulomb_friction": {"coulomb_friction": 0.02}, "drive_decoupling": DRIVE_TRUTH},
+           plant={"F_c": 0.02}, nominal=FILE_DRIVE_FORM, seed=14),
 )
 
 

@@ -706,7 +706,8 @@ def window_start(plist: list[ActuatorParams], i_d_meas, i_q_meas, omega, theta, 
     inverter's circle as the drive limits it (``drive.voltage_limit_mode``, ``drive.modulation_limit``), and the
     PI integrators hold what that drive's integrators hold there: the applied voltage less the decoupling
     feed-forward when ``drive.decoupling_enabled`` (R i), the whole voltage without it (R i + K ω: a drive without
-    feed-forward carries the back-EMF in its integrator); at the limit the back-calculation anti-windup leaves
+    feed-forward carries the back-EMF in its integrator); under ``drive.current_controller: complex_vector`` the
+    integrator holds ``v cos(p ω T_c/2) + K_p i - v_ff`` (its realized-voltage steady state); at the limit the back-calculation anti-windup leaves
     the PI output on the circle. The delayed voltage (``drive.current_loop_delay``) is the same held voltage.
     Started otherwise every window opens with a current transient that grows with K ω and makes the right K look
     wrong. With ``drive.dead_time`` the applied voltage also holds what the legs lose, the kernel's
@@ -768,7 +769,16 @@ def window_start(plist: list[ActuatorParams], i_d_meas, i_q_meas, omega, theta, 
         i_m = complex(float(np.asarray(i_d_meas)[c]), float(np.asarray(i_q_meas)[c]))
         _, L_ctl, K_ctl = controller_motor(p)
         v_ff = 1j * (m.pole_pairs * w * L_ctl * i_m + K_ctl * w) if d.decoupling_enabled else 0j
-        K[c], v[c], z[c] = Kc, v_app, v_app - v_ff
+        if d.current_controller == "complex_vector":
+            # its integrator settles where the realized voltage (the mean of two held periods seen from the
+            # present angle, v cos(p ω T_c/2)) equals the disturbance estimate z - K_p i_m + v_ff
+            # (kernel.control_tick); the measured current then sits short of the command by
+            # (1 - cos) v / K_p, which the recorded current already holds
+            phi = 0.5 * m.pole_pairs * w / d.current_loop_rate
+            K_p = 2.0 * math.pi * d.current_loop_bandwidth * L_ctl
+            K[c], v[c], z[c] = Kc, v_app, v_app * math.cos(phi) + K_p * i_m - v_ff
+        else:
+            K[c], v[c], z[c] = Kc, v_app, v_app - v_ff
     return WindowStart(i_d, i_q, v, z, K)
 
 

@@ -193,7 +193,7 @@ def _simulated_verdicts(s: Search, sel, ff, pars: dict, special: dict, verdicts:
 
 
 def _drive_second_pass(s: Search, j: _Judged, options, say: Say) -> bool:
-    """The drive's feed-forward identified again with the judged findings in the replay model
+    """The drive's form (current controller, feed-forward) identified again with the judged findings in the replay model
     (:func:`..drive_feedforward.identify`). The first pass replays the nominal model, and an unmodelled torque
     (Coulomb friction) drives its simulated speed, hence the back-EMF the two drives differ by, so far off that it
     cannot see the feed-forward (a drive without it behind a file that says it has one, plus 0.02 N*m of Coulomb
@@ -208,15 +208,15 @@ def _drive_second_pass(s: Search, j: _Judged, options, say: Say) -> bool:
     found = [a.effect for a in j.sel.accepted] + [f["effect"] for f in j.special["findings"]]
     if not found:
         return False
-    fld = drive_feedforward.FIELD
-    on_file = bool(ctx.params.drive.decoupling_enabled)
-    used = bool(ctx.drive_updates.get(fld, on_file))
+    on_file = drive_feedforward.form_of(ctx.params)
+    used = drive_feedforward.form_from_updates(ctx.drive_updates, ctx.params)
     model = refit.apply_thermal(j.params_linear, j.special)[0] if j.special["findings"] else j.params_linear
     starts_tr = refit.windows(ctx, options.window_s, options.max_windows, "train")
-    second = drive_feedforward.identify(ctx, model.replace(**{fld: on_file}), starts_tr, s.starts_holdout,
-                                        options.window_s, tolerance=options.tolerance, findings=tuple(found))
+    second = drive_feedforward.identify(ctx, model.replace(**drive_feedforward.fields(on_file)), starts_tr,
+                                        s.starts_holdout, options.window_s, tolerance=options.tolerance,
+                                        findings=tuple(found))
     if second["simulation"] is None or second["not_checkable"]:
-        say(f"5/6 judge: drive feed-forward, second pass with {', '.join(found)}: "
+        say(f"5/6 judge: drive form, second pass with {', '.join(found)}: "
             f"{drive_feedforward.note(second)}; the first pass stands")
         return False
     old_note = drive_feedforward.note(first)
@@ -230,9 +230,9 @@ def _drive_second_pass(s: Search, j: _Judged, options, say: Say) -> bool:
     ctx.notes = [new_note if n == old_note else n for n in ctx.notes]
     if new_note not in ctx.notes:
         ctx.notes.append(new_note)
-    now = bool(ctx.drive_updates.get(fld, on_file))
-    say(f"5/6 judge: {new_note}" + (f"; the findings are judged again with that drive ({fld}: "
-                                    f"{str(now).lower()})" if now != used else ""))
+    now = drive_feedforward.form_from_updates(ctx.drive_updates, ctx.params)
+    say(f"5/6 judge: {new_note}" + (f"; the findings are judged again with that drive ({now[0]}, "
+                                    f"{drive_feedforward.FIELD}: {str(now[1]).lower()})" if now != used else ""))
     return now != used
 
 
