@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from bldc_actuator.diagnosis.frame import simulate as refit
+from bldc_actuator.diagnosis.frame import simulate
 from bldc_actuator.model import Actuator
 from bldc_actuator.params import ActuatorParams, controller_motor, keep_controller_of
 
@@ -78,7 +78,7 @@ def test_a_drive_that_believes_the_nominal_flux_holds_the_flux_error_in_its_inte
 
 
 def test_the_replay_starts_each_window_in_the_kernels_own_steady_state_with_the_drives_model():
-    """``refit.window_start`` (the replay's start integrator) agrees with the kernel's steady integrator when the
+    """``simulate.window_start`` (the replay's start integrator) agrees with the kernel's steady integrator when the
     drive believes other values than the motor's (here all three differ)."""
     nom = BASE.replace(**{"motor.resistance_temperature_enabled": False})
     m = nom.motor
@@ -91,7 +91,7 @@ def test_the_replay_starts_each_window_in_the_kernels_own_steady_state_with_the_
         act.prescribe_motion(80.0)
         act.step(1e-3)
     s = act.state
-    ws = refit.window_start([true], [s.i_d], [s.i_q], [s.omega], [s.theta], [s.T_winding], [s.T_housing])
+    ws = simulate.window_start([true], [s.i_d], [s.i_q], [s.omega], [s.theta], [s.T_winding], [s.T_housing])
     assert ws.z[0] == pytest.approx(complex(s.z_d, s.z_q), abs=1e-6)
     assert ws.v[0] == pytest.approx(complex(s.v_d, s.v_q), abs=1e-6)
 
@@ -147,9 +147,9 @@ def test_a_torque_constant_error_behind_a_drive_tuned_on_the_nominal_motor_is_co
     assert load_yaml(tmp_path / "updated.yaml").drive.controller_torque_constant == K_nom
     # the mechanism: the same replay with the drive retuned on the finding is much worse
     ctx = ee.prepare([(sig, False)], nom)
-    starts = refit.windows(ctx, 0.1, 120, "all")
+    starts = simulate.windows(ctx, 0.1, 120, "all")
     found = nom.replace(**{"motor.torque_constant_q": up.motor.torque_constant_q})
-    kept = refit.replay(ctx, [found], starts, 0.1)[0]["velocity_rms"]
-    monkeypatch.setattr(refit, "keep_controller_of", lambda p, nominal: p)
-    retuned = refit.replay(ctx, [found], starts, 0.1)[0]["velocity_rms"]
+    kept = simulate.replay(ctx, [found], starts, 0.1)[0]["velocity_rms"]
+    monkeypatch.setattr(simulate, "keep_controller_of", lambda p, nominal: p)
+    retuned = simulate.replay(ctx, [found], starts, 0.1)[0]["velocity_rms"]
     assert retuned > 2.0 * kept, (kept, retuned)

@@ -12,7 +12,7 @@ import pytest
 
 from bldc_actuator.diagnosis import drive_feedforward
 from bldc_actuator.diagnosis.frame import equation_error as ee
-from bldc_actuator.diagnosis.frame import simulate as refit
+from bldc_actuator.diagnosis.frame import simulate
 from bldc_actuator.diagnosis.pipeline import diagnose
 from bldc_actuator.params import ActuatorParams
 
@@ -26,8 +26,8 @@ def _identify(truth_decoupling: bool, file_decoupling: bool, seed: int):
     truth = FILE.replace(**{"drive.decoupling_enabled": truth_decoupling})
     nominal = FILE.replace(**{"drive.decoupling_enabled": file_decoupling})
     ctx = ee.prepare([(steps_recording(truth, duration=8.0, seed=seed), False)], nominal, fc=None, holdout=0.3)
-    return drive_feedforward.identify(ctx, nominal, refit.windows(ctx, 0.1, 60, "train"),
-                                      refit.windows(ctx, 0.1, 60, "holdout"), 0.1)
+    return drive_feedforward.identify(ctx, nominal, simulate.windows(ctx, 0.1, 60, "train"),
+                                      simulate.windows(ctx, 0.1, 60, "holdout"), 0.1)
 
 
 @pytest.mark.parametrize("truth, file", [(False, True), (True, False)])
@@ -64,8 +64,8 @@ def test_kt_behind_a_drive_without_feedforward_simulates_better_with_the_identif
     assert ho["after"]["current_rms"] < ho["before"]["current_rms"]
     # ...because of the identified option: the same updated motor behind the file's drive replays worse
     ctx = rep._internals["ctx"]
-    starts = refit.windows(ctx, 0.1, 60, "holdout")
-    found, file_drive = refit.replay(ctx, [up, up.replace(**{"drive.decoupling_enabled": True})], starts, 0.1)
+    starts = simulate.windows(ctx, 0.1, 60, "holdout")
+    found, file_drive = simulate.replay(ctx, [up, up.replace(**{"drive.decoupling_enabled": True})], starts, 0.1)
     assert found["current_rms"] < file_drive["current_rms"]
     assert found["velocity_rms"] < file_drive["velocity_rms"]
 
@@ -106,7 +106,7 @@ def test_the_first_pass_cannot_see_the_feed_forward_behind_an_unmodelled_coulomb
     (0.020 vs 0.046 A); with the friction in the replay model the drive without feed-forward does (0.023 vs 0.017)."""
     nominal, sig = _coulomb_case(True, seed=1)
     ctx = ee.prepare([(sig, False)], nominal, holdout=0.3)
-    tr, ho = refit.windows(ctx, 0.1, 120, "train"), refit.windows(ctx, 0.1, 120, "holdout")
+    tr, ho = simulate.windows(ctx, 0.1, 120, "train"), simulate.windows(ctx, 0.1, 120, "holdout")
     first = drive_feedforward.identify(ctx, nominal, tr, ho, 0.1)
     assert not first["findings"] and first["simulation"]["candidate"] is True
     second = drive_feedforward.identify(ctx, nominal.replace(**{"effects.coulomb_friction": 0.02}), tr, ho, 0.1,
@@ -140,8 +140,8 @@ def test_a_missing_feed_forward_is_named_beside_a_coulomb_friction_the_file_lack
     assert any("first pass" in e for e in dd["evidence"])
     assert sum("drive form" in n for n in d["notes"]) == 1       # the first pass's note replaced
     ctx = rep._internals["ctx"]
-    starts = refit.windows(ctx, 0.1, 60, "holdout")
-    found, file_drive = refit.replay(ctx, [up, up.replace(**{"drive.decoupling_enabled": True})], starts, 0.1)
+    starts = simulate.windows(ctx, 0.1, 60, "holdout")
+    found, file_drive = simulate.replay(ctx, [up, up.replace(**{"drive.decoupling_enabled": True})], starts, 0.1)
     assert found["velocity_rms"] < 0.2 * file_drive["velocity_rms"]
     assert found["current_rms"] < file_drive["current_rms"]
 
@@ -197,8 +197,8 @@ def test_identify_names_the_current_controller_form(truth, file):
     rec_p = base.replace(**drive_feedforward.fields(truth))
     nominal = base.replace(**drive_feedforward.fields(file))
     ctx = ee.prepare([(steps_recording(rec_p, duration=8.0, seed=7), False)], nominal, fc=None, holdout=0.3)
-    r = drive_feedforward.identify(ctx, nominal, refit.windows(ctx, 0.1, 60, "train"),
-                                   refit.windows(ctx, 0.1, 60, "holdout"), 0.1)
+    r = drive_feedforward.identify(ctx, nominal, simulate.windows(ctx, 0.1, 60, "train"),
+                                   simulate.windows(ctx, 0.1, 60, "holdout"), 0.1)
     (f,) = r["findings"]
     assert f["updated_fields"] == drive_feedforward.fields(truth), r["simulation"]["training_current_error"]
     assert f["parameters"]["drive_form"] == drive_feedforward._label(truth)
@@ -207,8 +207,8 @@ def test_identify_names_the_current_controller_form(truth, file):
     assert s["with"] < s["without"] - s["noise_floor"]
     # the file right about the complex-vector form: no finding
     if truth == ("complex_vector", False):
-        r = drive_feedforward.identify(ctx, rec_p, refit.windows(ctx, 0.1, 60, "train"),
-                                       refit.windows(ctx, 0.1, 60, "holdout"), 0.1)
+        r = drive_feedforward.identify(ctx, rec_p, simulate.windows(ctx, 0.1, 60, "train"),
+                                       simulate.windows(ctx, 0.1, 60, "holdout"), 0.1)
         assert not r["findings"] and "reproduces the recorded current best" in r["rejected"][0]["reason"]
 
 

@@ -89,14 +89,14 @@ def test_windows_under_sets_a_batch_cannot_mix_are_simulated_in_groups():
     """Leave-one-out replays compare parameter sets that differ in the current-loop delay, which one BatchActuator
     cannot hold (a 10 kHz log made diagnose stop with that error): each group runs in its own batch, and a set's
     windows come out as they do alone."""
-    from bldc_actuator.diagnosis.frame import simulate as refit
+    from bldc_actuator.diagnosis.frame import simulate
 
     sig = steps_recording(NOMINAL, duration=4.0, seed=7)
     ctx = ee.prepare([(sig, False)], NOMINAL, fc=None, holdout=0.3)
-    starts = refit.windows(ctx, 0.1, 10, "all")
+    starts = simulate.windows(ctx, 0.1, 10, "all")
     delayed = NOMINAL.replace(**{"drive.current_loop_delay": 1e-4})
-    both = refit.simulate_windows(ctx, [NOMINAL, delayed], starts, 0.1)
-    alone = refit.simulate_windows(ctx, [NOMINAL], starts, 0.1)
+    both = simulate.simulate_windows(ctx, [NOMINAL, delayed], starts, 0.1)
+    alone = simulate.simulate_windows(ctx, [NOMINAL], starts, 0.1)
     n = len(starts)
     np.testing.assert_array_equal(both["sim_i"][:, :n], alone["sim_i"])
     assert np.max(np.abs(both["sim_v"][:, n:] - alone["sim_v"])) > 1e-3      # the delay acts

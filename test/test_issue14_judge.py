@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from bldc_actuator.diagnosis.frame import equation_error as ee
-from bldc_actuator.diagnosis.frame import simulate as refit
+from bldc_actuator.diagnosis.frame import simulate
 from bldc_actuator.diagnosis.pipeline import DiagnoseOptions, diagnose
 from bldc_actuator.params import ActuatorParams
 
@@ -39,8 +39,8 @@ def test_no_decoupling_delta_drive_the_true_torque_constant_replays_best_and_is_
     true = nom.replace(**{"motor.torque_constant_q": nom.motor.torque_constant_q * math.sqrt(1.5)})
     sig = closed_loop_recording(true, nom, reference, duration=20.0, seed=1)
     ctx = _ctx(sig, nom)
-    starts = refit.windows(ctx, 0.1, 120, "all")
-    r = refit.replay(ctx, [nom, true], starts, 0.1)
+    starts = simulate.windows(ctx, 0.1, 120, "all")
+    r = simulate.replay(ctx, [nom, true], starts, 0.1)
     assert r[1]["velocity_rms"] < 0.2 * r[0]["velocity_rms"], (r[0]["velocity_rms"], r[1]["velocity_rms"])
     rep = diagnose(sig, nom, options=DiagnoseOptions())
     assert [f["effect"] for f in rep.to_dict()["findings"]] == ["torque_constant_error"]
@@ -82,8 +82,8 @@ def test_every_window_starts_in_the_drives_own_steady_state(name):
     truth = BASE.replace(**DRIVES[name])
     sig = closed_loop_recording(truth, truth, reference, duration=8.0, seed=3, noise_i=0.03)
     ctx = _ctx(sig, truth)
-    starts = refit.windows(ctx, 0.1, 60, "all")
-    sim = refit.simulate_windows(ctx, [truth], starts, 0.1)
+    starts = simulate.windows(ctx, 0.1, 60, "all")
+    sim = simulate.simulate_windows(ctx, [truth], starts, 0.1)
     head = sim["sim_i"][:3] - sim["meas_i"][:3]
     err = float(np.sqrt(np.mean(head ** 2)))
     assert err < DEAD_TIME_BOUND.get(name, 0.035), err

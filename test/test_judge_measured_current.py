@@ -11,7 +11,7 @@ import pytest
 
 from bldc_actuator.diagnosis.frame import equation_error as ee
 from bldc_actuator.diagnosis.judge import simulated as judge
-from bldc_actuator.diagnosis.frame import simulate as refit
+from bldc_actuator.diagnosis.frame import simulate
 from bldc_actuator.params import ActuatorParams
 
 from test_issue14_judge_helpers import closed_loop_recording
@@ -29,9 +29,9 @@ def test_the_noise_drift_of_the_measured_current_replay_is_the_random_walk_of_th
     sig = closed_loop_recording(P, P, lambda t: 0.0 * t, duration=20.0, seed=2, noise_i=0.1)
     ctx = ee.prepare([(sig, False)], P)
     assert judge.current_noise_rms(ctx) == pytest.approx(0.1, rel=0.05)
-    starts = refit.windows(ctx, 0.1, 200, "all")
+    starts = simulate.windows(ctx, 0.1, 200, "all")
     p = P.replace(**change)
-    r = refit.replay(ctx, [p], starts, 0.1, drive="current")[0]
+    r = simulate.replay(ctx, [p], starts, 0.1, drive="current")[0]
     measured = float(np.sqrt(np.mean(np.square(r["per_window"]["velocity"]))))
     expected = 0.1 * p.motor.torque_constant_q / p.motor.rotor_inertia * np.sqrt(0.1 / 1000.0 / 2.0)
     assert judge.noise_drift(ctx, p, 0.1) == pytest.approx(expected, rel=0.05)

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from bldc_actuator.diagnosis.frame import equation_error as ee
-from bldc_actuator.diagnosis.frame import simulate as refit
+from bldc_actuator.diagnosis.frame import simulate
 from bldc_actuator.diagnosis.pipeline import DiagnoseOptions, diagnose
 from bldc_actuator.diagnosis.signals import Signals
 from bldc_actuator.model import Actuator
@@ -92,22 +92,22 @@ def held_loop() -> Signals:
 
 def _by_log_rate(monkeypatch) -> None:
     """The replay's old rule: hold or interpolate by the log rate alone."""
-    monkeypatch.setattr(refit, "command_replay",
-                        lambda ctx, params, starts, length, z=2.0: ee.CommandReplay(ctx.fs >= refit.REPLAY_HOLD_RATE,
+    monkeypatch.setattr(simulate, "command_replay",
+                        lambda ctx, params, starts, length, z=2.0: ee.CommandReplay(ctx.fs >= simulate.REPLAY_HOLD_RATE,
                                                                                     1, "log rate"))
 
 
 def _decided(sig: Signals) -> ee.CommandReplay:
     ctx = ee.prepare([(sig, False)], NOMINAL, holdout=0.3)
-    return refit.command_replay(ctx, NOMINAL, refit.windows(ctx, 0.1, 120, "train"), 0.1)
+    return simulate.command_replay(ctx, NOMINAL, simulate.windows(ctx, 0.1, 120, "train"), 0.1)
 
 
 def test_the_interpolation_steps_are_the_drives_loop_ticks():
-    assert refit.replay_substeps(1000.0) == 1                                   # default: held at 1 kHz
-    assert refit.replay_substeps(1000.0, hold=False, loop_rate=10_000.0) == 10  # one per current-loop tick
-    assert refit.replay_substeps(1000.0, hold=False, loop_rate=1e6) == refit.MAX_INTERPOLATION_SUBSTEPS
-    assert refit.replay_substeps(100.0, hold=False, loop_rate=10_000.0) == 5    # below 500 Hz: as before
-    assert refit.replay_substeps(100.0, hold=True) == 1
+    assert simulate.replay_substeps(1000.0) == 1                                   # default: held at 1 kHz
+    assert simulate.replay_substeps(1000.0, hold=False, loop_rate=10_000.0) == 10  # one per current-loop tick
+    assert simulate.replay_substeps(1000.0, hold=False, loop_rate=1e6) == simulate.MAX_INTERPOLATION_SUBSTEPS
+    assert simulate.replay_substeps(100.0, hold=False, loop_rate=10_000.0) == 5    # below 500 Hz: as before
+    assert simulate.replay_substeps(100.0, hold=True) == 1
 
 
 def test_a_command_updated_between_samples_is_interpolated(fast_loop):

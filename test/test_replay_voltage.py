@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from bldc_actuator.diagnosis.frame import equation_error as ee
-from bldc_actuator.diagnosis.frame import simulate as refit
+from bldc_actuator.diagnosis.frame import simulate
 from bldc_actuator.params import ActuatorParams
 
 from test_issue14_judge_helpers import closed_loop_recording, triangle_then_sines
@@ -19,8 +19,8 @@ def test_a_resistance_error_shows_in_the_replayed_voltage_not_in_the_current():
     true = BASE.replace(**{"motor.phase_resistance": BASE.motor.phase_resistance * 3.0})   # hot winding + cables
     sig = closed_loop_recording(true, BASE, triangle_then_sines, duration=16.0, seed=3)
     ctx = ee.prepare([(sig, False)], BASE)
-    starts = refit.windows(ctx, 0.1, 80, "all")
-    nom, tru = refit.replay(ctx, [BASE, true], starts, 0.1)
+    starts = simulate.windows(ctx, 0.1, 80, "all")
+    nom, tru = simulate.replay(ctx, [BASE, true], starts, 0.1)
     # expected voltage error of the nominal replay: (R_true - R_nom) i_q at the recorded current
     i_q = ctx.sig["i_q"]
     dR = true.motor.phase_resistance - BASE.motor.phase_resistance
@@ -36,6 +36,6 @@ def test_no_voltage_channel_without_a_recorded_voltage():
     sig = closed_loop_recording(BASE, BASE, triangle_then_sines, duration=8.0, seed=4,
                                 channels=("current_command", "current", "position", "velocity"))
     ctx = ee.prepare([(sig, False)], BASE)
-    starts = refit.windows(ctx, 0.1, 20, "all")
-    (r,) = refit.replay(ctx, [BASE], starts, 0.1)
+    starts = simulate.windows(ctx, 0.1, 20, "all")
+    (r,) = simulate.replay(ctx, [BASE], starts, 0.1)
     assert r["voltage_rms"] is None and np.isfinite(r["velocity_rms"])

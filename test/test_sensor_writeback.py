@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from bldc_actuator.diagnosis.pipeline import diagnose
-from bldc_actuator.diagnosis.frame.simulate import sensor_gains_for_q_ripple, sensor_offsets_for_q_ripple
+from bldc_actuator.diagnosis.frame.writeback import sensor_gains_for_q_ripple, sensor_offsets_for_q_ripple
 from bldc_actuator.diagnosis.signals import Signals
 from bldc_actuator.kernel import measured_current_dq
 from bldc_actuator.model import Actuator

@@ -12,7 +12,7 @@ constant look wrong in the closed-loop replay (motulator's tp_kt: K x1.15 replay
 Equation error cannot see it (it uses the measured current); only a simulation can.
 
 Method (modelled on :mod:`.drive_modes`): the TRAINING windows are replayed in closed loop (multiple shooting
-from recorded states, :func:`.refit.simulate_windows`, the node's own kernel) with the file's form and with each
+from recorded states, :func:`.simulate.simulate_windows`, the node's own kernel) with the file's form and with each
 other form of :data:`FORMS`. The form whose simulated CURRENT is closest to the recorded (low-passed) current is
 the candidate; a change is accepted when, on the HELD-OUT windows, it lowers the simulated current error beyond the
 noise floor (``z`` standard errors of the paired per-window difference) and the practical tolerance. The speed is
@@ -21,7 +21,7 @@ its change is reported), but a change of the controller LAW must also replay the
 windows and not worse on the held-out ones: the current is judged against its zero-phase low-passed reading,
 which favours the complex-vector law's smoother response even behind a PI drive.
 
-:func:`.refit.window_start` starts each form's integrator in its own steady state. One entry point, plain data
+:func:`.simulate.window_start` starts each form's integrator in its own steady state. One entry point, plain data
 out: :func:`identify`; the finding's effect is ``drive_decoupling`` (the drive-side effect of the benchmark sets),
 its ``updated_fields`` name the whole form (both fields).
 """
@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from ..params import ActuatorParams
-from .frame import simulate as refit
+from .frame import simulate
 
 EFFECT = "drive_decoupling"
 FIELD = "drive.decoupling_enabled"
@@ -85,7 +85,7 @@ def identify(ctx, params: ActuatorParams, starts_train: list[int], starts_holdou
     """``{"findings": [...], "rejected": [...], "not_checkable": [...], "simulation": {...} | None,
     "updated_fields": {...}}`` for the drive's feed-forward; ``params`` = the model the windows are replayed
     with: the nominal one in the first pass (decided before any finding is judged, like
-    :func:`.refit.command_replay`), the nominal one with the accepted ``findings`` (their names, for the report)
+    :func:`.simulate.command_replay`), the nominal one with the accepted ``findings`` (their names, for the report)
     in the second pass (:mod:`.judge.stage`: an unmodelled torque such as Coulomb friction drives the nominal
     replay's speed away, and with it the back-EMF the two drives differ by). The other forms are always tested
     against ``params``' own form (:func:`form_of`)."""
@@ -97,7 +97,7 @@ def identify(ctx, params: ActuatorParams, starts_train: list[int], starts_holdou
                                      "command", "needs": ["current", "velocity|position", "current_command|"
                                                           "torque_command"]})
         return out
-    tr, ho = refit.thin(starts_train, MAX_WINDOWS), refit.thin(starts_holdout, MAX_WINDOWS)
+    tr, ho = simulate.thin(starts_train, MAX_WINDOWS), simulate.thin(starts_holdout, MAX_WINDOWS)
     if len(tr) < MIN_WINDOWS or len(ho) < MIN_WINDOWS:
         out["not_checkable"].append({"effect": EFFECT, "needs": [],
                                      "reason": f"too few windows to replay ({len(tr)} training, {len(ho)} held-out; "
@@ -106,7 +106,7 @@ def identify(ctx, params: ActuatorParams, starts_train: list[int], starts_holdou
     nominal = form_of(params)
     others = [f for f in FORMS if f != nominal]
     sets = [params] + [params.replace(**fields(f)) for f in others]
-    e_tr = refit.window_errors(ctx, sets, tr, window_s)
+    e_tr = simulate.window_errors(ctx, sets, tr, window_s)
     i_tr = [float(np.mean(e["current"])) for e in e_tr]
     w_tr_all = [float(np.mean(e["velocity"])) for e in e_tr]
     # a form with the other current-controller LAW must also replay the speed best: the current is compared with
@@ -152,7 +152,7 @@ def identify(ctx, params: ActuatorParams, starts_train: list[int], starts_holdou
         return out
     sim["candidate"] = best[1]
     sim["candidate_form"] = list(best)
-    e_ho = refit.window_errors(ctx, [sets[0], sets[best_k]], ho, window_s)
+    e_ho = simulate.window_errors(ctx, [sets[0], sets[best_k]], ho, window_s)
     d_i = e_ho[0]["current"] - e_ho[1]["current"]
     imp, se = float(np.mean(d_i)), float(np.std(d_i, ddof=1) / math.sqrt(len(d_i)))
     before, after = float(np.mean(e_ho[0]["current"])), float(np.mean(e_ho[1]["current"]))

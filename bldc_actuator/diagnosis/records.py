@@ -7,7 +7,7 @@ from typing import Any, Callable
 
 from ..params import ActuatorParams
 from .frame.equation_error import Context, Fit
-from .frame.simulate import FinalFit
+from .frame.writeback import FinalFit
 from .frame.selection import SelectionResult
 from .significance import Verdict
 

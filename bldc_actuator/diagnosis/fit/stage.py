@@ -13,7 +13,8 @@ import time
 
 from ...params import keep_controller_of
 from . import base_model, output_error
-from ..frame import simulate as refit
+from ..frame import simulate
+from ..frame import thermal as thermal_net
 from ..records import Judgement, Model, Say, Search
 
 
@@ -33,7 +34,7 @@ def run(s: Search, j: Judgement, options, say: Say) -> Model:
                         f"equation-error values are written"}
         say(f"5/6 refit: output-error refit {oe['reason']}")
     elif options.replay and j.selection.accepted and s.starts_holdout:
-        starts_tr = refit.windows(ctx, options.window_s, options.max_windows, "train")
+        starts_tr = simulate.windows(ctx, options.window_s, options.max_windows, "train")
         oe = output_error.refit(ctx, ctx.params, params, starts_tr, s.starts_holdout, options.window_s,
                                 findings=output_error.finding_values(j.parameters), tolerance=options.tolerance)
         for d in oe.get("discrepancies", []):
@@ -50,7 +51,7 @@ def run(s: Search, j: Judgement, options, say: Say) -> Model:
     if not any(f["effect"] == "iron_loss" for f in special["findings"]):
         special["extra_heat"] = None      # iron-loss heat only with an accepted iron_loss finding
     if special["findings"]:
-        params, tnotes, tns = refit.apply_thermal(params, special)
+        params, tnotes, tns = thermal_net.apply_thermal(params, special)
         notes += tnotes
         not_sim += tns
     # the written file re-simulates like the recorded drive: its current loop keeps the nominal motor values

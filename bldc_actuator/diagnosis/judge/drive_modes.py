@@ -5,7 +5,7 @@ d/q vector scaled onto the circle (``proportional``), v_d served first (``d_prio
 (``q_priority``), or a field-weakening regulator that commands negative i_d (``field_weakening``). Below the
 limit they are identical, so equation error cannot tell them apart and only a simulation can: the windows of
 the recording where the model's voltage demand reaches the circle are replayed (multiple shooting from recorded
-states, :func:`.refit.simulate_windows`, the node's own kernel) under every mode.
+states, :func:`.simulate.simulate_windows`, the node's own kernel) under every mode.
 
 Method: the mode with the lowest simulated error on the TRAINING windows near the limit (current, speed and,
 when recorded, the d current; each channel's error relative to the nominal mode's) is the candidate; it is
@@ -25,7 +25,7 @@ import numpy as np
 
 from ...kernel import VOLTAGE_LIMIT_MODES
 from ...params import ActuatorParams
-from ..frame import simulate as refit
+from ..frame import simulate
 
 #: a sample counts as "at the voltage limit" when the model's steady voltage demand |(R i + K ω) + j p ω L i|
 #: reaches this fraction of the circle (the PI's transient demand goes above it), or the recorded voltage does
@@ -40,7 +40,7 @@ def _near_limit(ctx) -> np.ndarray:
     """Per raw sample: does the nominal model's steady voltage demand, or the recorded voltage, reach NEAR_LIMIT
     of the circle?"""
     S, m = ctx.sig, ctx.params.motor
-    cmd, _ = refit._commands(ctx)
+    cmd, _ = simulate.commands(ctx)
     w = S["omega_s"]
     need = np.hypot(S["R"] * cmd + S["K"] * w, m.pole_pairs * w * m.q_inductance * cmd)
     limit = ctx.params.drive.modulation_limit * S["v_max"]
@@ -52,7 +52,7 @@ def _near_limit(ctx) -> np.ndarray:
 
 def _limit_windows(ctx, which: str, window_s: float, near: np.ndarray) -> list[int]:
     L = max(5, int(round(window_s * ctx.fs)))
-    return refit.thin([s for s in refit.windows(ctx, window_s, 10 ** 9, which) if near[s:s + L + 1].any()],
+    return simulate.thin([s for s in simulate.windows(ctx, window_s, 10 ** 9, which) if near[s:s + L + 1].any()],
                       MAX_WINDOWS)
 
 
@@ -98,7 +98,7 @@ def identify(ctx, params: ActuatorParams, window_s: float, *, wanted: bool = Tru
     nominal = params.drive.voltage_limit_mode
     variants = _variants(params)
     modes = list(variants)
-    e_tr = dict(zip(modes, refit.window_errors(ctx, list(variants.values()), tr, window_s, current_d=True)))
+    e_tr = dict(zip(modes, simulate.window_errors(ctx, list(variants.values()), tr, window_s, current_d=True)))
     scores = {m: _score(e_tr[m], e_tr[nominal]) for m in modes}
     best = min(modes, key=lambda m: scores[m])
     sim = {"training_windows": len(tr), "heldout_windows": len(ho), "window_s": window_s,
@@ -109,7 +109,7 @@ def identify(ctx, params: ActuatorParams, window_s: float, *, wanted: bool = Tru
                                 "reason": f"the nominal mode ({nominal}) simulates the windows at the limit best "
                                           f"(relative training error {', '.join(f'{m} {v:.3f}' for m, v in scores.items())})"})
         return out
-    e_ho = refit.window_errors(ctx, [variants[nominal], variants[best]], ho, window_s, current_d=True)
+    e_ho = simulate.window_errors(ctx, [variants[nominal], variants[best]], ho, window_s, current_d=True)
     d_i = e_ho[0]["current"] - e_ho[1]["current"]
     d_w = e_ho[0]["velocity"] - e_ho[1]["velocity"]
     imp, se = float(np.mean(d_i)), float(np.std(d_i, ddof=1) / math.sqrt(len(d_i)))

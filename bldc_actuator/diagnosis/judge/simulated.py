@@ -3,7 +3,7 @@ the code the node runs — reproduce held-out data better WITH the finding than 
 
 :func:`simulate_findings`: for every accepted equation-error finding it builds the updated
 parameters without that finding (leave one out), replays the held-out windows under all parameter sets in ONE
-``BatchActuator`` run (multiple shooting from recorded states, :func:`.refit.replay`), and compares, window by
+``BatchActuator`` run (multiple shooting from recorded states, :func:`.simulate.replay`), and compares, window by
 window, the simulated error of the finding's channel (speed for torque-side effects, current for voltage-side
 and tracking effects). Torque-side findings are judged in the replay driven by the MEASURED current wherever it
 is recorded (nothing of the drive's internals needed; each set's current-noise drift taken out,
@@ -26,7 +26,11 @@ from typing import Any
 
 import numpy as np
 
-from ..frame import simulate as refit
+from ..frame import simulate
+
+from ..frame import thermal as thermal_net
+
+from ..frame import writeback
 
 #: the simulated channel in which each equation's effects show (voltage-side effects: the drive's q voltage,
 #: since the current loop hides them in the current; current when no voltage was recorded)
@@ -66,13 +70,13 @@ def simulate_findings(ctx, sel, pars, lib, starts: list[int], window_s: float, z
     no held-out windows."""
     if not starts or not sel.accepted:
         return {}
-    full, _, _ = refit.updated_params(ctx, sel, pars, lib)
+    full, _, _ = writeback.updated_params(ctx, sel, pars, lib)
     effects = [a.effect for a in sel.accepted]
     sets = [full]
     for e in effects:
         sub = type(sel)(**{**sel.__dict__, "accepted": [a for a in sel.accepted if a.effect != e]})
-        sets.append(refit.updated_params(ctx, sub, pars, lib)[0])
-    res = refit.replay(ctx, sets, starts, window_s)
+        sets.append(writeback.updated_params(ctx, sub, pars, lib)[0])
+    res = simulate.replay(ctx, sets, starts, window_s)
     if not res or not res[0].get("available"):
         return {}
     out: dict[str, dict[str, Any]] = {}
@@ -86,7 +90,7 @@ def simulate_findings(ctx, sel, pars, lib, starts: list[int], window_s: float, z
     # reproduces the recorded current (:func:`drive_check`)
     res_cd = None
     if "current" in ctx.have and any(_channel(lib, e) == "velocity" for e in effects):
-        res_cd = refit.replay(ctx, sets, starts, window_s, drive="current")
+        res_cd = simulate.replay(ctx, sets, starts, window_s, drive="current")
         if not res_cd or not res_cd[0].get("available"):
             res_cd = None
     w_full = res[0]["per_window"]
@@ -376,7 +380,7 @@ def judge_voltage_limit(ctx, params_with, finding: dict[str, Any], starts: list[
         return {"channel": None, "verdict": "not checkable in simulation", "reason": "no held-out windows"}
     fld = "drive.modulation_limit"
     without = params_with.replace(**{fld: ctx.params.drive.modulation_limit})
-    res = refit.replay(ctx, [without, params_with], starts, window_s)
+    res = simulate.replay(ctx, [without, params_with], starts, window_s)
     if not res or not res[0].get("available"):
         return {"channel": None, "verdict": "not checkable in simulation", "reason": "no replay"}
     return _verdict(res[0]["per_window"], res[1]["per_window"], "current", "velocity", z, tolerance, len(starts),
@@ -391,7 +395,7 @@ THERMAL_MIN_KELVIN = 0.05
 
 
 def _thermal_holdout(ctx, params, extra_heat) -> float:
-    err = refit.thermal_error(ctx, params, extra_heat=extra_heat)
+    err = thermal_net.thermal_error(ctx, params, extra_heat=extra_heat)
     vals = [err[c]["holdout_rms"] for c in ("winding_temperature", "housing_temperature") if c in err]
     vals = [v for v in vals if math.isfinite(v)]
     return float(math.sqrt(np.mean(np.square(vals)))) if vals else float("nan")
@@ -406,12 +410,12 @@ def judge_thermal(ctx, linear_params, thermal: dict[str, Any]) -> dict[str, dict
     found = [f for f in thermal.get("findings", []) if f.get("simulated") and f["effect"] in ("thermal_parameters", "iron_loss")]
     if not found:
         return {}
-    full, _, _ = refit.apply_thermal(linear_params, thermal)
+    full, _, _ = thermal_net.apply_thermal(linear_params, thermal)
     e_with = _thermal_holdout(ctx, full, thermal.get("extra_heat"))
     out: dict[str, dict[str, Any]] = {}
     for f in found:
         sub = dict(thermal, findings=[g for g in thermal["findings"] if g is not f])
-        without, _, _ = refit.apply_thermal(linear_params, sub)
+        without, _, _ = thermal_net.apply_thermal(linear_params, sub)
         e_without = _thermal_holdout(ctx, without, None if f["effect"] == "iron_loss" else thermal.get("extra_heat"))
         gain = e_without - e_with
         floor = max(THERMAL_MIN_KELVIN, THERMAL_MIN_GAIN * e_without) if math.isfinite(e_without) else float("nan")
@@ -430,8 +434,8 @@ def judge_thermal(ctx, linear_params, thermal: dict[str, Any]) -> dict[str, dict
 
 
 def _updated(ctx, sel, lib):
-    ff = refit.final_fit(ctx, sel)
-    return refit.updated_params(ctx, sel, refit.effect_parameters(ctx, sel, ff, lib), lib)[0]
+    ff = writeback.final_fit(ctx, sel)
+    return writeback.updated_params(ctx, sel, writeback.effect_parameters(ctx, sel, ff, lib), lib)[0]
 
 
 def arbitrate_aliases(ctx, sel, reselect, lib, starts: list[int], window_s: float, z: float = 2.0,
@@ -464,7 +468,7 @@ def arbitrate_aliases(ctx, sel, reselect, lib, starts: list[int], window_s: floa
             continue
         eqs = [q for q in lib[chosen].equations if q in _CHANNEL]
         ch = _CHANNEL[eqs[0]] if eqs else "velocity"
-        r = refit.replay(ctx, [_updated(ctx, sel, lib), _updated(ctx, sel2, lib)], starts, window_s)
+        r = simulate.replay(ctx, [_updated(ctx, sel, lib), _updated(ctx, sel2, lib)], starts, window_s)
         if not r or not r[0].get("available"):
             continue
         if ch == "voltage" and r[0]["per_window"].get("voltage") is None:

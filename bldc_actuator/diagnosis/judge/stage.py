@@ -17,7 +17,9 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from .. import drive_feedforward, significance
-from ..frame import simulate as refit
+from ..frame import simulate as replay
+from ..frame import thermal as thermal_net
+from ..frame import writeback
 from . import drive_modes
 from . import simulated as judge
 from ..frame.candidates import SPECIAL
@@ -65,9 +67,9 @@ def _significance(ctx, lib, pars: dict, special_findings: list, options) -> list
 
 
 def _refit_linear(s: Search, sel):
-    ff = refit.final_fit(s.ctx, sel)
+    ff = writeback.final_fit(s.ctx, sel)
     sel.final_fit = ff.fit
-    return ff, refit.effect_parameters(s.ctx, sel, ff, s.lib)
+    return ff, writeback.effect_parameters(s.ctx, sel, ff, s.lib)
 
 
 def _unexcited_aliases(s: Search, sel, options, say: Say) -> None:
@@ -167,7 +169,7 @@ def _simulated_verdicts(s: Search, sel, ff, pars: dict, special: dict, verdicts:
         if r.get("alias_of") and r["alias_of"] not in kept and r.get("verdict") == "not_decidable":
             r["reason"] = r["reason"].replace(f"{r['alias_of']} is reported, but which",
                                               f"{r['alias_of']} was then refused, and which")
-    params_linear, notes, not_sim = refit.updated_params(ctx, sel, pars, lib)
+    params_linear, notes, not_sim = writeback.updated_params(ctx, sel, pars, lib)
 
     # thermal network: full-length thermal simulation of the model with the linear findings (leave one out)
     thermal = judge.judge_thermal(ctx, params_linear, special) if special["findings"] else {}
@@ -181,7 +183,7 @@ def _simulated_verdicts(s: Search, sel, ff, pars: dict, special: dict, verdicts:
     # the drive's fitted voltage limit: held-out windows replayed with it and with the nominal one
     vs = next((f for f in special["findings"] if f["effect"] == "voltage_saturation"), None)
     if vs is not None and options.replay:
-        v = judge.judge_voltage_limit(ctx, refit.apply_thermal(params_linear, {"findings": [vs]})[0], vs, starts,
+        v = judge.judge_voltage_limit(ctx, thermal_net.apply_thermal(params_linear, {"findings": [vs]})[0], vs, starts,
                                       win, tolerance=options.tolerance)
         sim["voltage_saturation"] = v
         if options.simulation_gate and v["verdict"] not in ("confirmed", "not checkable in simulation"):
@@ -210,8 +212,8 @@ def _drive_second_pass(s: Search, j: _Judged, options, say: Say) -> bool:
         return False
     on_file = drive_feedforward.form_of(ctx.params)
     used = drive_feedforward.form_from_updates(ctx.drive_updates, ctx.params)
-    model = refit.apply_thermal(j.params_linear, j.special)[0] if j.special["findings"] else j.params_linear
-    starts_tr = refit.windows(ctx, options.window_s, options.max_windows, "train")
+    model = thermal_net.apply_thermal(j.params_linear, j.special)[0] if j.special["findings"] else j.params_linear
+    starts_tr = replay.windows(ctx, options.window_s, options.max_windows, "train")
     second = drive_feedforward.identify(ctx, model.replace(**drive_feedforward.fields(on_file)), starts_tr,
                                         s.starts_holdout, options.window_s, tolerance=options.tolerance,
                                         findings=tuple(found))
@@ -254,8 +256,8 @@ def run(s: Search, options, say: Say) -> Judgement:
         f"{len(sel.not_checkable) + len(special['not_checkable'])} not checkable")
 
     # practical significance and identifiability, before the final fit and the parameter file
-    ff = refit.final_fit(ctx, sel)
-    pars = refit.effect_parameters(ctx, sel, ff, lib)
+    ff = writeback.final_fit(ctx, sel)
+    pars = writeback.effect_parameters(ctx, sel, ff, lib)
     verdicts = _significance(ctx, lib, pars, special["findings"], options)
     dropped = {v.effect for v in verdicts}
     if dropped:
@@ -279,7 +281,7 @@ def run(s: Search, options, say: Say) -> Judgement:
 
     # the drive's behaviour at the voltage limit: only the simulation can see it
     if options.replay:
-        with_special = refit.apply_thermal(params_linear, special)[0] if special["findings"] else params_linear
+        with_special = thermal_net.apply_thermal(params_linear, special)[0] if special["findings"] else params_linear
         dm = drive_modes.identify(ctx, with_special, win, wanted="voltage_limit_mode" in s.names, z=2.0,
                                   tolerance=options.tolerance)
         for k in ("findings", "rejected", "not_checkable"):

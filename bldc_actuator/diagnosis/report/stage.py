@@ -13,7 +13,8 @@ import numpy as np
 from ..frame import candidates as cands
 from . import decidability, residual_structure
 from ..frame import locate as loc_mod
-from ..frame import simulate as refit
+from ..frame import simulate
+from ..frame import thermal as thermal_net
 from ..frame.equation_error import ee_metrics, rms
 from .document import DiagnosisReport
 from ..results import Undecidable, decide
@@ -126,7 +127,7 @@ def run(signals, params, s: Search, j: Judgement, m: Model, options, say: Say, t
             f["simulation"] = j.simulation[f["effect"]]
     replay_ho = None
     if options.replay and s.starts_holdout:
-        before, after = refit.replay(ctx, [params, m.params], s.starts_holdout, options.window_s)
+        before, after = simulate.replay(ctx, [params, m.params], s.starts_holdout, options.window_s)
         replay_ho = {"before": before, "after": after}
         for f in findings:
             if f["effect"] in ("thermal_parameters", "iron_loss"):
@@ -142,8 +143,8 @@ def run(signals, params, s: Search, j: Judgement, m: Model, options, say: Say, t
                                      "after": after["voltage_rms"]})
     thermal_cmp = None
     if any(c in ctx.have for c in ("winding_temperature", "housing_temperature")) and "i_q" in ctx.sig:
-        tb = refit.thermal_error(ctx, params)
-        ta = refit.thermal_error(ctx, m.params, extra_heat=j.special.get("extra_heat"))
+        tb = thermal_net.thermal_error(ctx, params)
+        ta = thermal_net.thermal_error(ctx, m.params, extra_heat=j.special.get("extra_heat"))
         thermal_cmp = {"before": {k: v for k, v in tb.items() if k != "sim"},
                        "after": {k: v for k, v in ta.items() if k != "sim"}}
     timing = {**s.timing, **m.timing, "show": time.perf_counter() - t0}

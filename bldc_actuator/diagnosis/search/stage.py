@@ -20,8 +20,10 @@ from .. import drive_feedforward
 from ..frame import candidates as cands
 from ..frame import equation_error as ee
 from ..frame import locate as loc_mod
-from ..frame import simulate as refit
-from ..frame.equation_error import ee_metrics, rms
+from ..frame import simulate
+from ..frame import thermal as thermal_net
+from ..frame import voltage_limit
+from ..frame.equation_error import ee_metrics
 from ..frame.selection import forward_select
 from ..records import Say, Search
 
@@ -153,12 +155,12 @@ def run(signals, params: ActuatorParams, options, say: Say) -> Search | None:
     if options.replay:
         # how the replay applies the logged commands between samples: decided from the training windows, before
         # anything is judged, and kept on the context for every replay after it
-        starts_tr = refit.windows(ctx, options.window_s, options.max_windows, "train")
-        ctx.command_replay = refit.command_replay(ctx, params, starts_tr, options.window_s)
-        ctx.notes.append(refit.command_replay_note(ctx.command_replay, ctx.fs))
+        starts_tr = simulate.windows(ctx, options.window_s, options.max_windows, "train")
+        ctx.command_replay = simulate.command_replay(ctx, params, starts_tr, options.window_s)
+        ctx.notes.append(simulate.command_replay_note(ctx.command_replay, ctx.fs))
         say(f"2/6 compare: {ctx.notes[-1]}")
-        starts_all = refit.windows(ctx, options.window_s, options.max_windows, "all")
-        starts_ho = refit.windows(ctx, options.window_s, options.max_windows, "holdout")
+        starts_all = simulate.windows(ctx, options.window_s, options.max_windows, "all")
+        starts_ho = simulate.windows(ctx, options.window_s, options.max_windows, "holdout")
         # the drive's feed-forward (the user rarely knows it): decided by the closed-loop replay's current on the
         # training windows, confirmed on the held-out ones; every updated parameter set carries it
         ctx.drive_identified = drive_feedforward.identify(ctx, params, starts_tr, starts_ho, options.window_s,
@@ -168,7 +170,7 @@ def run(signals, params: ActuatorParams, options, say: Say) -> Search | None:
         if dn:
             ctx.notes.append(dn)
             say(f"2/6 compare: {dn}")
-        replay_nominal = refit.replay(ctx, [params], starts_all, options.window_s)[0] if starts_all else None
+        replay_nominal = simulate.replay(ctx, [params], starts_all, options.window_s)[0] if starts_all else None
     timing["compare"] = time.perf_counter() - t0
     msg = ", ".join(f"{eq} RMS {m['train_rms']:.3g}" for eq, m in ee_metrics(ctx, nominal_fit).items())
     if replay_nominal and replay_nominal.get("available"):
@@ -189,8 +191,8 @@ def run(signals, params: ActuatorParams, options, say: Say) -> Search | None:
     t0 = time.perf_counter()
     linear = [n for n in names if n not in cands.SPECIAL]
     sel = forward_select(ctx, located, lib, linear, options.gate, progress=lambda m: say(f"4/6 attribute: {m}"))
-    special = refit.thermal_select(ctx, [n for n in names if n in cands.THERMAL], lib, options.gate)
-    vsat = refit.voltage_saturation_check(ctx, lib, options.gate, "voltage_saturation" in names)
+    special = thermal_net.thermal_select(ctx, [n for n in names if n in cands.THERMAL], lib, options.gate)
+    vsat = voltage_limit.voltage_saturation_check(ctx, lib, options.gate, "voltage_saturation" in names)
     for k in ("findings", "rejected", "not_checkable"):
         special[k] = special[k] + vsat[k]
     timing["attribute"] = time.perf_counter() - t0
