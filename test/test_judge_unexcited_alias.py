@@ -66,7 +66,7 @@ def test_dead_time_under_a_one_signed_current_the_data_separate_is_named_in_plac
     truth = NOMINAL.replace(**{"drive.dead_time": 2e-6})
     sig = closed_loop_recording(truth, NOMINAL, _reference(2.0), duration=12.0, seed=1)
     assert np.percentile(sig.channels["current"], 0.5) > 0.0
-    rep = diagnose(sig, NOMINAL, options=DiagnoseOptions(simulation_gate=False)).to_dict()
+    rep = diagnose(sig, NOMINAL, options=DiagnoseOptions()).to_dict()
     assert [f["effect"] for f in rep["findings"]] == ["dead_time"], \
         [(r["effect"], r["reason"]) for r in rep["rejected"]]
     f = rep["findings"][0]
