@@ -489,11 +489,15 @@ def _lowpass_window(ctx: Context, x: np.ndarray) -> np.ndarray:
     n = x.shape[0]
     pad = int(math.ceil(3.0 * ctx.fs / ctx.dec.fc))
     m = max(2, min(n, pad))
-    A = np.column_stack([np.arange(m), np.ones(m)])
-    head, *_ = np.linalg.lstsq(A, x[:m], rcond=None)
-    tail, *_ = np.linalg.lstsq(A, x[n - m:], rcond=None)
-    left = np.outer(np.arange(-pad, 0), head[0]) + head[1]
-    right = np.outer(np.arange(m, m + pad), tail[0]) + tail[1]
+    k = np.arange(m) - 0.5 * (m - 1)
+
+    def line(seg, at):     # least squares per column, elementwise: a column's result never depends on its batch
+        mean = seg.mean(axis=0)
+        slope = (k[:, None] * (seg - mean)).sum(axis=0) / float(k @ k)
+        return mean + (np.asarray(at, float) - 0.5 * (m - 1))[:, None] * slope
+
+    left = line(x[:m], np.arange(-pad, 0))
+    right = line(x[n - m:], np.arange(m, m + pad))
     y = sps.sosfiltfilt(ctx.dec.sos, np.concatenate([left, x, right]), axis=0, padtype=None)
     return y[pad:pad + n]
 
