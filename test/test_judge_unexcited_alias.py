@@ -61,15 +61,17 @@ def test_dead_time_under_a_one_signed_current_the_data_separate_is_named_in_plac
     than ``R i`` by far more than the BIC threshold at the smaller effective sample count, and the held-out part
     agrees: dead_time is named (2 µs within 5 %) in the resistance's place, the resistance listed as rejected,
     no alias (motulator's tp_dead_time_loaded was reported "not decidable which" with a training ΔBIC of +8.5 for
-    the offset at ITS residual's sample count). The equation-error decision only: the simulated judge refuses this
-    finding here ("worsens the simulated velocity", voltage error 1.47 -> 0.078 V), a judge matter."""
+    the offset at ITS residual's sample count). The simulation judge confirms it (q-voltage 1.47 -> 0.03 V); it
+    refused it ("worsens the simulated velocity") while the replay compared the true dead time's unfiltered
+    6 f_e current ripple with the low-passed recording (test_dead_time_replay.py)."""
     truth = NOMINAL.replace(**{"drive.dead_time": 2e-6})
     sig = closed_loop_recording(truth, NOMINAL, _reference(2.0), duration=12.0, seed=1)
     assert np.percentile(sig.channels["current"], 0.5) > 0.0
-    rep = diagnose(sig, NOMINAL, options=DiagnoseOptions(simulation_gate=False)).to_dict()
+    rep = diagnose(sig, NOMINAL, options=DiagnoseOptions()).to_dict()
     assert [f["effect"] for f in rep["findings"]] == ["dead_time"], \
         [(r["effect"], r["reason"]) for r in rep["rejected"]]
     f = rep["findings"][0]
     assert f["parameters"]["dead_time"] == pytest.approx(2e-6, rel=0.05)
+    assert f["simulated"] and f["simulation"]["verdict"] == "confirmed", f.get("simulation")
     assert not [a for a in rep["aliases"] if "dead_time" in a["effects"]]
     assert any(r["effect"] == "resistance_error" and "separates them" in r["reason"] for r in rep["rejected"])
