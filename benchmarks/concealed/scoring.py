@@ -312,8 +312,9 @@ SIM_MOVE = 0.01
 
 def simulated_verdict(report: dict) -> tuple[str | None, str]:
     """Compare the report's held-out simulations before -> after (``compare.replay.holdout`` short-window
-    replay: velocity, current, position, q-voltage where recorded; ``compare.thermal``: full-length temperature): "better" when one
-    channel improves by more than 1 % and none gets worse by more than 1 %."""
+    replay: velocity, current, position, q-voltage where recorded; ``compare.thermal``: full-length temperature):
+    "better" when one channel improves by more than 1 % and none gets worse by more than 1 %, a move counting only
+    beyond 2 standard errors of its paired per-window change where the report gives it."""
     cmp_ = report.get("compare") or {}
     pairs = []
     ho = ((cmp_.get("replay") or {}).get("holdout") or {})
@@ -332,8 +333,15 @@ def simulated_verdict(report: dict) -> tuple[str | None, str]:
     if not pairs:
         return None, ""
     detail = "; ".join(f"{ch} {b:.3g}→{a:.3g}" for ch, b, a in pairs)
-    worse = [ch for ch, b, a in pairs if a > b * (1 + SIM_MOVE)]
-    better = [ch for ch, b, a in pairs if a < b * (1 - SIM_MOVE)]
+    # a channel moves only beyond 1 % AND beyond 2 standard errors of the held-out windows' paired change (the
+    # report's ``compare.replay.holdout.paired``; thermal channels and older reports: the 1 % rule alone)
+    paired = ho.get("paired") or {}
+
+    def moved(ch):
+        p = paired.get(ch)
+        return True if p is None else bool(p.get("significant"))
+    worse = [ch for ch, b, a in pairs if a > b * (1 + SIM_MOVE) and moved(ch)]
+    better = [ch for ch, b, a in pairs if a < b * (1 - SIM_MOVE) and moved(ch)]
     if worse:
         return "worse", detail
     return ("better" if better else "unchanged"), detail

@@ -107,6 +107,7 @@ def replay(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], le
         out.append({"available": True, "windows": nW, "window_s": length,
                     "per_window": {"current": np.sqrt(np.mean(ei ** 2, axis=0)),
                                    "velocity": np.sqrt(np.mean(ew ** 2, axis=0)),
+                                   "position": np.sqrt(np.mean(eth ** 2, axis=0)),
                                    "voltage": (np.sqrt(np.mean((sim_v[:, sl] - meas_v[:, sl]) ** 2, axis=0))
                                                if meas_v is not None else None)},
                     "current_rms": float(np.sqrt(np.mean(ei ** 2))), "velocity_rms": float(np.sqrt(np.mean(ew ** 2))),

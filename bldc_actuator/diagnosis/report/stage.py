@@ -44,6 +44,25 @@ def _strip(r):
     return {k: v for k, v in r.items() if k not in ("trace", "per_window")}
 
 
+def paired_change(before: dict, after: dict) -> dict[str, dict]:
+    """Per channel, the held-out windows' paired change of the squared simulation error, after - before: its mean
+    (= after_rms^2 - before_rms^2), standard error over the windows and whether the change is beyond 2 standard
+    errors. A change of RMS within that band is the recording's noise, not the model (an error already at the noise
+    floor moves by a few per cent with any parameter change)."""
+    out: dict[str, dict] = {}
+    if not (before.get("available") and after.get("available")):
+        return out
+    for ch in ("current", "velocity", "position", "voltage"):
+        b, a = (before.get("per_window") or {}).get(ch), (after.get("per_window") or {}).get(ch)
+        if b is None or a is None or len(b) < 2:
+            continue
+        d = np.asarray(a, float) ** 2 - np.asarray(b, float) ** 2
+        mean, se = float(np.mean(d)), float(np.std(d, ddof=1) / np.sqrt(len(d)))
+        out[ch] = {"mean_square_change": mean, "standard_error": se, "windows": int(len(d)),
+                   "significant": bool(abs(mean) > 2.0 * se)}
+    return out
+
+
 def _explained(ctx, sel, a) -> float:
     """Fraction of the nominal residual variance (weighted, training) removed by this effect's columns alone."""
     alone = fit_model(ctx, sel.cols, list(ctx.nuisance) + list(a.variant.keys), sel.weights, sel.iterating)
@@ -128,7 +147,7 @@ def run(signals, params, s: Search, j: Judgement, m: Model, options, say: Say, t
     replay_ho = None
     if options.replay and s.starts_holdout:
         before, after = simulate.replay(ctx, [params, m.params], s.starts_holdout, options.window_s)
-        replay_ho = {"before": before, "after": after}
+        replay_ho = {"before": before, "after": after, "paired": paired_change(before, after)}
         for f in findings:
             if f["effect"] in ("thermal_parameters", "iron_loss"):
                 continue

@@ -1,0 +1,56 @@
+"""The held-out simulation's before/after comparison counts a channel as moved only beyond the noise of its
+held-out windows (``report.stage.paired_change``, used by the benchmark's simulated verdict): an error already at
+the recording's noise floor moves by a few per cent with any parameter change, which is not "worse"."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from bldc_actuator.diagnosis.report.stage import paired_change
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from benchmarks.concealed.scoring import simulated_verdict  # noqa: E402
+
+
+def _replay(per_window: dict) -> dict:
+    out = {"available": True, "windows": len(per_window["velocity"]), "window_s": 0.1, "per_window": per_window}
+    for ch, v in per_window.items():
+        out[ch + "_rms"] = float(np.sqrt(np.mean(np.asarray(v) ** 2)))
+    return out
+
+
+def _report(before, after):
+    paired = paired_change(before, after)
+    strip = lambda r: {k: v for k, v in r.items() if k != "per_window"}  # noqa: E731
+    return {"compare": {"replay": {"holdout": {"before": strip(before), "after": strip(after), "paired": paired}}}}
+
+
+def test_a_noise_level_rise_is_not_worse_and_a_real_one_is():
+    rng = np.random.default_rng(0)
+    n = 20
+    noise_v = 0.005 * (1 + 0.3 * rng.standard_normal(n))            # voltage error at the noise floor
+    before = _replay({"velocity": 2.5 * np.ones(n), "current": 0.016 * np.ones(n), "voltage": noise_v})
+    # speed error falls 100x (the friction found); the voltage error rises ~4 % by window-to-window noise
+    after_noise = _replay({"velocity": 0.027 * np.ones(n), "current": 0.014 * np.ones(n),
+                           "voltage": noise_v * (1.04 + 0.3 * rng.standard_normal(n))})
+    p = paired_change(before, after_noise)
+    assert after_noise["voltage_rms"] > 1.01 * before["voltage_rms"] and not p["voltage"]["significant"]
+    assert p["velocity"]["significant"] and p["velocity"]["mean_square_change"] < 0
+    assert simulated_verdict(_report(before, after_noise))[0] == "better"
+    # the same speed gain with the voltage error doubled in every window: worse
+    after_real = _replay({"velocity": 0.027 * np.ones(n), "current": 0.014 * np.ones(n), "voltage": 2.0 * noise_v})
+    assert paired_change(before, after_real)["voltage"]["significant"]
+    assert simulated_verdict(_report(before, after_real))[0] == "worse"
+
+
+def test_mean_square_change_is_the_difference_of_the_squared_rms():
+    rng = np.random.default_rng(1)
+    b = {"velocity": rng.uniform(0.1, 1.0, 30), "current": rng.uniform(0.01, 0.02, 30)}
+    a = {"velocity": rng.uniform(0.1, 1.0, 30), "current": rng.uniform(0.01, 0.02, 30)}
+    before, after = _replay(b), _replay(a)
+    p = paired_change(before, after)
+    assert np.isclose(p["velocity"]["mean_square_change"], after["velocity_rms"] ** 2 - before["velocity_rms"] ** 2)
+    assert p["velocity"]["windows"] == 30
