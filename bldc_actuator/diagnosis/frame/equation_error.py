@@ -505,6 +505,15 @@ def prepare(parts: list[tuple[Any, bool]], params: ActuatorParams, *, fc: float 
 FRAME_DELAY_MAX_PERIODS = 2.5
 
 
+def acting_v_q(S: dict, pole_pairs: int) -> np.ndarray:
+    """The q voltage that acts on the winding: the logged d/q vector turned back by p ω d when the recording's
+    voltage frame delay d is known (``S["frame_delay"]``, :func:`frame_delay`), else the logged ``v_q``."""
+    if "frame_delay" not in S or "v_d" not in S:
+        return S["v_q"]
+    phi = pole_pairs * S["omega"] * float(S["frame_delay"])
+    return S["v_q"] * np.cos(phi) - S["v_d"] * np.sin(phi)
+
+
 def frame_delay(ctx: Context) -> tuple[float, float] | None:
     """(d [s], its sd) or None: how long after its sampling instant the logged d/q voltage acts, in a frame the
     rotor has turned by ``p ω d`` since (a PWM holds the voltage in stator coordinates; a drive that advances its
@@ -841,9 +850,8 @@ def _build_blocks(ctx: Context) -> None:
         v_q = S["v_q"]
         fd = frame_delay(ctx)
         if fd is not None:     # the q voltage that acts on the winding: the logged vector turned back by p ω d
-            phi = m.pole_pairs * S["omega"] * fd[0]
-            v_q = S["v_q"] * np.cos(phi) - S["v_d"] * np.sin(phi)
             S["frame_delay"] = np.array(fd[0])
+            v_q = acting_v_q(S, m.pole_pairs)
             ctx.notes.append(f"voltage equation: the logged voltage acts {1e6 * fd[0]:.3g} ± {1e6 * fd[1]:.2g} µs "
                              f"after its sampling instant, in a frame the rotor has turned by p ω d since (from the "
                              f"d-axis equation; a PWM that holds it in stator coordinates): the q equation uses it "
