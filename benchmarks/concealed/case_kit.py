@@ -182,6 +182,31 @@ def load_train_truth(path: Path) -> dict[str, np.ndarray]:
         return {k: z[k] for k in z.files}
 
 
+def write_truth(case, case_dir: Path, nominal, *, label: str, source: str, specifics: dict,
+                concealment: Callable[[Any, dict, Any], dict], torque_sensor: bool = False) -> dict:
+    """A third-party case's ``params.yaml`` (``nominal``, the user's belief) and ``truth.json`` from its definition
+    and the training run's stored clean signals (no simulation); ``specifics``: the set's own truth fields
+    (written after ``source``), ``concealment(case, signals, nominal)``: its hidden-term record."""
+    from bldc_actuator.params import dump_yaml
+
+    dump_yaml(nominal, case_dir / "params.yaml", header=f"{label} concealed case {case.name}: the NOMINAL model")
+    sig = load_train_truth(case_dir / "train_truth.npz")
+    s = seeds(case)
+    truth = {
+        "case": case.name, "effects": list(case.effects), "story": case.story, "truth": case.truth,
+        "alias_ok": {k: list(v) for k, v in case.alias_ok.items()}, "source": source, **specifics,
+        "concealment": concealment(case, sig, nominal), "oracle": None,
+        "recording_key": (case_dir / STAMP).read_text().strip(), "generation_seconds": generation_seconds(case_dir),
+        "train": {"excitation": "speed: triangle + multisine", "duration_s": case.train_s, "seed": s["train"]},
+        "heldout": {"excitation": "speed: triangle + multisine", "duration_s": case.heldout_s, "seed": s["heldout"]},
+        "log": {"rate": case.log_rate, "filter": "sample", "torque_sensor": torque_sensor},
+        "ranges": {"max_abs_velocity_motor_rad_s": float(np.max(np.abs(sig["w"]))),
+                   "max_abs_current_A": float(np.max(np.abs(sig["i_q"])))},
+    }
+    (case_dir / "truth.json").write_text(json.dumps(truth, indent=2, default=float) + "\n")
+    return truth
+
+
 def generation_seconds(case_dir: Path) -> float | None:
     p = case_dir / GENERATION
     if not p.exists():

@@ -29,7 +29,6 @@ Run in the peers venv (``bash benchmarks/peers/setup.sh``): ``benchmarks/run_con
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -230,30 +229,14 @@ def write_recordings(case: GEMCase, runs: dict, d: Path) -> None:
 
 def write_truth(case: GEMCase, d: Path) -> dict:
     """``params.yaml`` and ``truth.json`` of ``case`` from its definition and the stored clean training signals."""
-    from bldc_actuator.params import dump_yaml
-
-    nominal = nominal_params(case)
-    dump_yaml(nominal, d / "params.yaml", header=f"GEM concealed case {case.name}: the NOMINAL model")
-    sig = kit.load_train_truth(d / "train_truth.npz")
-    s = kit.seeds(case)
-    truth = {
-        "case": case.name, "effects": list(case.effects), "story": case.story, "truth": case.truth,
-        "alias_ok": {k: list(v) for k, v in case.alias_ok.items()},
-        "source": f"gym-electric-motor {gem_version()} (SynchronousMotorSystem: PermanentMagnetSynchronousMotor, "
-                  "ContB6BridgeConverter, PolynomialStaticLoad, IdealVoltageSupply, ScipyOdeSolver); drive: PI "
-                  "current (decoupling and back-EMF feed-forward) + PI speed control written outside GEM",
-        "gem_motor": truth_motor(case), "gem_load": truth_load(case), "tau_ext": case.tau_ext,
-        "interlocking_time": case.interlocking_time, "nominal_overrides": case.nominal,
-        "concealment": hidden_term(case, sig, nominal), "oracle": None,
-        "recording_key": (d / kit.STAMP).read_text().strip(), "generation_seconds": kit.generation_seconds(d),
-        "train": {"excitation": "speed: triangle + multisine", "duration_s": case.train_s, "seed": s["train"]},
-        "heldout": {"excitation": "speed: triangle + multisine", "duration_s": case.heldout_s, "seed": s["heldout"]},
-        "log": {"rate": case.log_rate, "filter": "sample", "torque_sensor": False},
-        "ranges": {"max_abs_velocity_motor_rad_s": float(np.max(np.abs(sig["w"]))),
-                   "max_abs_current_A": float(np.max(np.abs(sig["i_q"])))},
-    }
-    (d / "truth.json").write_text(json.dumps(truth, indent=2, default=float) + "\n")
-    return truth
+    return kit.write_truth(
+        case, d, nominal_params(case), label="GEM",
+        source=f"gym-electric-motor {gem_version()} (SynchronousMotorSystem: PermanentMagnetSynchronousMotor, "
+               "ContB6BridgeConverter, PolynomialStaticLoad, IdealVoltageSupply, ScipyOdeSolver); drive: PI "
+               "current (decoupling and back-EMF feed-forward) + PI speed control written outside GEM",
+        specifics={"gem_motor": truth_motor(case), "gem_load": truth_load(case), "tau_ext": case.tau_ext,
+                   "interlocking_time": case.interlocking_time, "nominal_overrides": case.nominal},
+        concealment=hidden_term)
 
 
 def _job(args):
