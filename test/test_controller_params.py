@@ -24,7 +24,7 @@ def _believes(p: ActuatorParams, q: ActuatorParams) -> ActuatorParams:
                         "drive.controller_torque_constant": m.torque_constant_q})
 
 
-def _history(p: ActuatorParams, n: int = 3000) -> np.ndarray:
+def state_history(p: ActuatorParams, n: int = 3000) -> np.ndarray:
     """State after every 1 ms step under a varying current command and load (speed up to a few hundred rad/s)."""
     act = Actuator(p)
     out = []
@@ -45,7 +45,7 @@ def _history(p: ActuatorParams, n: int = 3000) -> np.ndarray:
 ])
 def test_controller_fields_equal_to_the_motor_are_bit_identical_to_the_default(drive):
     p = BASE.replace(**drive)
-    a, b = _history(p), _history(_believes(p, p))
+    a, b = state_history(p), state_history(_believes(p, p))
     assert np.ptp(a[:, 2]) > 50.0            # it moves: the feed-forward carries something
     np.testing.assert_array_equal(a, b)
 

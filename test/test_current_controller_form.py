@@ -18,6 +18,8 @@ from bldc_actuator.params import ActuatorParams, ParameterError
 
 from bldc_actuator.kernel import COMPILED
 
+from test_controller_params import state_history
+
 #: the default drive's trace written by commit 3d1290a (before the option), on each kernel path (numba calls libm,
 #: numpy its own exp/sin: the paths differ in the last bit, docs/physics.md)
 DATA = Path(__file__).resolve().parent / "data" / ("pi_default_trace_3d1290a.npz" if COMPILED
@@ -32,29 +34,16 @@ TRACE_CASES = {
 }
 
 
-def _history(p: ActuatorParams, n: int = 1500) -> np.ndarray:
-    """State after every 1 ms step under a varying current command and load (the stored trace's run)."""
-    act = Actuator(p)
-    out = []
-    for k in range(n):
-        act.set_current_command(6.0 * math.sin(2 * math.pi * 2.0 * k * 1e-3) + 3.0)
-        act.set_load_torque(0.02 * math.cos(2 * math.pi * 0.7 * k * 1e-3))
-        act.step(1e-3)
-        s = act.state
-        out.append((s.i_d, s.i_q, s.omega, s.theta, s.v_d, s.v_q, s.z_d, s.z_q, s.T_winding, s.i_d_ref))
-    return np.array(out)
-
-
 @pytest.mark.parametrize("case", sorted(TRACE_CASES))
 def test_default_pi_is_bit_identical_to_the_stored_trace(case):
     ref = np.load(DATA)[case]
     p = BASE.replace(**TRACE_CASES[case])
     assert p.drive.current_controller == "pi"
-    got = _history(p)
+    got = state_history(p, n=1500)   # the stored trace's run
     assert np.ptp(got[:, 2]) > 50.0            # it moves
     np.testing.assert_array_equal(got, ref)
     # the complex-vector form on the same run differs (the test can fail)
-    cv = _history(p.replace(**{"drive.current_controller": "complex_vector"}), n=300)
+    cv = state_history(p.replace(**{"drive.current_controller": "complex_vector"}), n=300)
     assert np.max(np.abs(cv[:, 1] - ref[:300, 1])) > 1e-4
 
 
