@@ -47,30 +47,27 @@ def _get(params: dict, *names: str) -> float | None:
     return None
 
 
-def _get_str(params: dict, *names: str) -> str | None:
-    """A categorical parameter: the first key equal to (or ending with ``.``) one of ``names`` whose value is a
-    string, or a dict holding one under value / estimate."""
+def _get_of(kind: type, params: dict, names: tuple[str, ...]):
+    """The first key equal to (or ending with ``.``) one of ``names`` whose value is a ``kind``, or a dict holding
+    one under value / estimate."""
     for name in names:
         for key, val in params.items():
             if key == name or key.endswith("." + name):
                 if isinstance(val, dict):
-                    val = next((val[k] for k in ("value", "estimate") if isinstance(val.get(k), str)), None)
-                if isinstance(val, str):
+                    val = next((val[k] for k in ("value", "estimate") if isinstance(val.get(k), kind)), None)
+                if isinstance(val, kind):
                     return val
     return None
+
+
+def _get_str(params: dict, *names: str) -> str | None:
+    """A categorical parameter (see :func:`_get_of`)."""
+    return _get_of(str, params, names)
 
 
 def _get_bool(params: dict, *names: str) -> bool | None:
-    """A flag (the drive's ``decoupling_enabled``): the first key equal to (or ending with ``.``) one of ``names``
-    whose value is a bool (or a dict holding one under value / estimate)."""
-    for name in names:
-        for key, val in params.items():
-            if key == name or key.endswith("." + name):
-                if isinstance(val, dict):
-                    val = next((val[k] for k in ("value", "estimate") if isinstance(val.get(k), bool)), None)
-                if isinstance(val, bool):
-                    return val
-    return None
+    """A flag, the drive's ``decoupling_enabled`` (see :func:`_get_of`)."""
+    return _get_of(bool, params, names)
 
 
 def _drive_form(params: dict) -> str | None:
