@@ -478,9 +478,15 @@ def test_flush_interval_puts_a_slow_stream_on_disk(msgs, tmp_path):
 
 
 SIGNAL_CHILD = textwrap.dedent("""
-    import os, sys, time
+    import os, signal, sys, time
     from sensor_msgs.msg import JointState
     from bldc_actuator.recording import McapRecorder, install_signal_finalizer
+    if sys.argv[2] == "default":
+        # Python leaves SIGINT ignored when it starts with it ignored (a background job of a non-interactive
+        # shell, nohup): the test must not depend on how pytest was launched
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    else:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
     rec = McapRecorder(sys.argv[1], parameters={"drive.bus_voltage": 12.0})
     install_signal_finalizer(rec)
     i = 0
@@ -496,7 +502,7 @@ SIGNAL_CHILD = textwrap.dedent("""
                                                 (signal.SIGINT, -signal.SIGINT)])
 def test_signal_finalizer_closes_the_file(msgs, tmp_path, signum, returncode):
     path = tmp_path / "sig.mcap"
-    proc = subprocess.Popen([sys.executable, "-c", SIGNAL_CHILD, str(path)], stdout=subprocess.PIPE,
+    proc = subprocess.Popen([sys.executable, "-c", SIGNAL_CHILD, str(path), "default"], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, cwd=REPO)
     try:
         assert proc.stdout.readline().strip() == "ready"
@@ -514,6 +520,28 @@ def test_signal_finalizer_closes_the_file(msgs, tmp_path, signum, returncode):
     n = len(r["/joint_states"])
     assert n >= 200 and [m.position[0] for _, m in r["/joint_states"]] == [float(i) for i in range(n)]
     assert r.params().drive.bus_voltage == 12.0
+
+
+def test_an_ignored_sigint_stays_ignored(msgs, tmp_path):
+    """A process started with SIGINT ignored (nohup, a background job) keeps recording through a SIGINT; the
+    finalizer still closes the file on SIGTERM."""
+    path = tmp_path / "ign.mcap"
+    proc = subprocess.Popen([sys.executable, "-c", SIGNAL_CHILD, str(path), "ignored"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, cwd=REPO)
+    try:
+        assert proc.stdout.readline().strip() == "ready"
+        proc.send_signal(signal.SIGINT)
+        with pytest.raises(subprocess.TimeoutExpired):
+            proc.wait(timeout=1.0)          # still running: the ignored SIGINT did nothing
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 128 + signal.SIGTERM, err
+    r = read_recording(path)
+    assert r.finalized and r.metadata["finalized_by"] == "signal SIGTERM"
 
 
 # ------------------------------------------------------------------------------------------ record-info
