@@ -443,3 +443,31 @@ def test_dataset_registry_and_profile_detection(shared_data_dir, tmp_path):
             assert load(info.path).meta.get("profile"), info.name
     with pytest.raises(KeyError, match="no dataset named"):
         realdata.load_dataset("ak80-9/nope", shared_data_dir)
+
+
+def _rest_then_motion(freeze: tuple[float, float] | None = None, held_speed: float | None = None) -> Signals:
+    """3 s at rest (velocity exactly 0, the angle standing still, current noise), then motion; ``freeze``: the
+    velocity sensor repeats one value over that span while the angle moves; ``held_speed``: the motion is a
+    constant speed whose sensor reads exactly that value."""
+    rate = 1000.0
+    t = np.arange(8000) / rate
+    mov = t >= 3.0
+    w = np.where(mov, 5 * np.sin(2 * np.pi * 0.7 * (t - 3)) if held_speed is None else held_speed, 0.0)
+    th = 1.0 + np.concatenate([[0.0], np.cumsum(0.5 * (w[1:] + w[:-1]) / rate)])
+    cur = 0.02 * np.random.default_rng(1).standard_normal(len(t)) + np.where(mov, 0.5 * w, 0.0)
+    w_meas = w.copy()
+    if freeze is not None:
+        k = (t > freeze[0]) & (t < freeze[1])
+        w_meas[k] = w_meas[np.argmax(k)]
+    return Signals(t, {"position": th, "velocity": w_meas, "current": cur}, "rest")
+
+
+def test_rest_and_held_speed_are_not_a_stuck_sensor_but_a_frozen_speed_is():
+    """A velocity of exactly 0 for 3 s while the angle stands still is an actuator at rest (it was flagged "stuck"),
+    a speed read exactly constant while the angle advances at that speed is a held speed; a velocity sensor that
+    repeats one value for 2.5 s while the angle does something else is stuck — and is found although the rest
+    samples make its median step 0 (it was not)."""
+    assert _issues(clean(_rest_then_motion(), params=ActuatorParams()), "constant") == []
+    assert _issues(clean(_rest_then_motion(held_speed=3.0), params=ActuatorParams()), "constant") == []
+    (hit,) = _issues(clean(_rest_then_motion(freeze=(4.0, 6.5)), params=ActuatorParams()), "constant", "velocity")
+    assert "stuck" in hit.detail and hit.count == 2499 and hit.first_time == pytest.approx(4.001)

@@ -269,6 +269,30 @@ def _diff_sigma(x: np.ndarray, segments) -> float:
     return float(1.4826 * np.median(np.abs(d - np.median(d))) / math.sqrt(2))
 
 
+def _run_explained_by_position(t: np.ndarray, ch: dict, name: str, i0: int, i1: int, value: float) -> bool:
+    """Does the position explain a run of one repeated ``value`` of channel ``name`` from sample ``i0`` to ``i1``?
+    A speed channel: the position moved by ``value`` x the run's duration (within 5 % and the position's own noise:
+    at rest, 0 rad/s while the angle stands still). A current or torque at exactly 0 while the angle stands still:
+    an idle or disabled drive. Without a position channel nothing is explained."""
+    pos = ch.get("position")
+    if pos is None or name not in ("velocity",) + CURRENTS + TORQUES:
+        return False
+    if name != "velocity" and value != 0.0:
+        return False
+    seg = np.flatnonzero(np.isfinite(pos[i0:i1 + 1])) + i0
+    if len(seg) < 2:
+        return False
+    x = pos[seg]
+    d2 = np.diff(x, 2)
+    noise = 1.4826 * float(np.median(np.abs(d2 - np.median(d2)))) / math.sqrt(6.0) if len(d2) >= 3 else 0.0
+    steps = np.abs(np.diff(x))
+    quantum = float(steps[steps > 0].min()) if (steps > 0).any() else 0.0
+    duration = float(t[seg[-1]] - t[seg[0]])
+    speed = value if name == "velocity" else 0.0
+    moved = float(x[-1] - x[0])
+    return abs(moved - speed * duration) <= 0.05 * abs(speed) * duration + max(5.0 * noise, 3.0 * quantum)
+
+
 def _no_load_speed(params, bus: float) -> float | None:
     try:
         from ... import frames
@@ -773,13 +797,23 @@ def clean(raw: Signals, limits: dict | None = None, params=None) -> Signals:
         if name in COMMAND_CHANNELS:
             continue
         d = np.diff(fin)
-        if np.median(np.abs(d)) > 0 and name != "position":
-            need = max(int(ctx.lim["stuck_samples"]), int(ctx.lim["stuck_seconds"] * rate) if np.isfinite(rate) else 0)
-            change = np.flatnonzero(d != 0)
-            starts = np.concatenate([[0], change + 1])
-            ends = np.concatenate([change + 1, [len(fin)]])
-            lens = ends - starts
-            long = np.flatnonzero(lens >= need)
+        need = max(int(ctx.lim["stuck_samples"]), int(ctx.lim["stuck_seconds"] * rate) if np.isfinite(rate) else 0)
+        change = np.flatnonzero(d != 0)
+        starts = np.concatenate([[0], change + 1])
+        ends = np.concatenate([change + 1, [len(fin)]])
+        lens = ends - starts
+        # runs the position explains (the actuator at rest, a speed held exactly) are no stuck sensor, and they do
+        # not make a channel that changes every sample while it moves look like a slow one
+        moving = np.ones(len(fin), bool)
+        explained = np.zeros(len(starts), bool)
+        if name != "position":
+            for k in np.flatnonzero(lens >= need):
+                if _run_explained_by_position(t, ch, name, fin_idx[starts[k]], fin_idx[ends[k] - 1], fin[starts[k]]):
+                    explained[k] = True
+                    moving[starts[k]:ends[k]] = False
+        d_moving = np.diff(fin[moving]) if moving.sum() > 1 else d
+        if name != "position" and len(d_moving) and np.median(np.abs(d_moving)) > 0:
+            long = np.flatnonzero((lens >= need) & ~explained)
             if len(long):
                 total = int(lens[long].sum())
                 L = int(long[np.argmax(lens[long])])
