@@ -299,13 +299,10 @@ def test_hidden_effect_is_identifiable_by_an_oracle(name):
     """Concealed is not absent: an estimator told the effect's form recovers its size from the recorded
     channels alone (the hardest ones: N_c = 252 cogging, order-p ripple, −0.12 %/K flux; and at 10 kHz, where
     the oracle once took its derivatives with a 1 ms step)."""
-    from benchmarks.concealed import oracle
-
     case = C.get_case(name)
     rec, = T.simulate([C.truth_specs(case)[0]], [case.train.build(C.controller_rate(case))],
                       post=lambda i, r: C.logged(r, case.log))
-    main, est = oracle.estimate(name, {"effects": list(case.effects), "truth": case.truth,
-                                       "nominal_overrides": case.nominal}, rec)
+    main, est = C.oracle_estimate(case, rec)
     true = case.truth[case.effects[0]][main]
     assert est == pytest.approx(true, rel=0.15)
 

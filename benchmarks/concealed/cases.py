@@ -22,6 +22,7 @@ from typing import Callable
 import numpy as np
 
 from . import excitation as ex
+from .oracle import estimate
 from .truth import COLUMNS, Drive, Plant, Reference, Sensors, TruthSpec, simulate
 
 SQRT3_2 = math.sqrt(1.5)
@@ -547,6 +548,12 @@ def concealment(case: Case, full: dict, no_effect: dict, no_noise: dict) -> dict
     return out
 
 
+def oracle_estimate(case: Case, rec: dict) -> tuple[str, float | None]:
+    """An estimator told the hidden effect's form (:func:`.oracle.estimate`) on ``case``'s recording ``rec``."""
+    return estimate(case.name, {"effects": list(case.effects), "truth": case.truth}, rec,
+                    dict(NOMINAL_BASE, **case.nominal), COGGING_ORDER)
+
+
 def generate(cases, outdir: Path, *, progress: Callable[[str], None] | None = None, workers: int = 2) -> dict:
     """Simulate every case (training, held-out, and the two twins of the training recording) and write
     the files. Returns ``{case name: truth dict}``."""
@@ -587,12 +594,9 @@ def generate(cases, outdir: Path, *, progress: Callable[[str], None] | None = No
         tr_spec, ho_spec = truth_specs(case)
         ora = None
         if not case.is_null:
-            from .oracle import estimate
-
             main = next(iter(case.truth[case.effects[0]]))
             true_value = case.truth[case.effects[0]][main]
-            _, est = estimate(case.name, {"effects": list(case.effects), "truth": case.truth,
-                                          "nominal_overrides": case.nominal}, full)
+            _, est = oracle_estimate(case, full)
             ora = {"effect": case.effects[0], "parameter": main, "true": true_value, "estimate": est,
                    "rel_error": None if est is None else abs(est - true_value) / abs(true_value)}
         truth = {

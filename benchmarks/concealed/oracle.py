@@ -20,7 +20,6 @@ import math
 import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
-from .cases import COGGING_ORDER, NOMINAL_BASE
 
 RATE = 1000.0     #: the rate the oracle was written for (its filter and decimation numbers are per 1 kHz)
 
@@ -88,10 +87,11 @@ def _sign(w_s, eps=0.3):
     return np.tanh(w_s / eps)
 
 
-def estimate(case_name: str, truth: dict, rec: dict) -> tuple[str, float | None]:
-    """(main parameter name, oracle estimate in the truth's unit) for the case's first hidden effect."""
-    nominal = dict(NOMINAL_BASE)
-    nominal.update(truth.get("nominal_overrides", {}))
+def estimate(case_name: str, truth: dict, rec: dict, nominal: dict, cogging_order: int) -> tuple[str, float | None]:
+    """(main parameter name, oracle estimate in the truth's unit) for the case's first hidden effect. ``nominal``:
+    the case's whole nominal parameter set (flat names); ``cogging_order``: the stator's cogging periods per
+    revolution (both given by :mod:`.cases`, which this module does not import)."""
+    nominal = dict(nominal)
     if not truth["effects"]:
         return "", None
     effect = truth["effects"][0]
@@ -120,7 +120,7 @@ def estimate(case_name: str, truth: dict, rec: dict) -> tuple[str, float | None]
     if effect == "inertia_error":
         return main, mechanical(rec, nominal, {"fc": known_fric})["J"] / nominal["motor.rotor_inertia"]
     if effect in ("cogging_torque", "electrical_angle_ripple"):
-        order = COGGING_ORDER if effect == "cogging_torque" else nominal["motor.pole_pairs"]
+        order = cogging_order if effect == "cogging_torque" else nominal["motor.pole_pairs"]
         # angle-synchronous fit where the order is resolved by the 1 kHz samples and the recording
         rate = rate_of(rec)
         est = mechanical(rec, nominal, {"cs": lambda th, w, r: np.cos(order * th) * _slow(w, order, rate),
