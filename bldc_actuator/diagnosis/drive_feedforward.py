@@ -22,8 +22,9 @@ windows and not worse on the held-out ones: the current is judged against its ze
 which favours the complex-vector law's smoother response even behind a PI drive.
 
 :func:`.simulate.window_start` starts each form's integrator in its own steady state. One entry point, plain data
-out: :func:`identify`; the finding's effect is ``drive_decoupling`` (the drive-side effect of the benchmark sets),
-its ``updated_fields`` name the whole form (both fields).
+out: :func:`identify`; the finding's effect is ``drive_current_controller`` (the drive-side effect of the benchmark
+sets; ``drive_decoupling`` before, when it named the feed-forward flag alone), its ``updated_fields`` name the whole
+form (both fields).
 """
 
 from __future__ import annotations
@@ -36,7 +37,9 @@ import numpy as np
 from ..params import ActuatorParams
 from .frame import simulate
 
-EFFECT = "drive_decoupling"
+EFFECT = "drive_current_controller"
+#: the name the finding had before (reports written then say it; :data:`FORMER_EFFECTS` maps it)
+FORMER_EFFECTS = {"drive_decoupling": EFFECT}
 FIELD = "drive.decoupling_enabled"
 CONTROLLER_FIELD = "drive.current_controller"
 #: the drive forms a file can be wrong about: (current controller, feed-forward). motulator's complex-vector
