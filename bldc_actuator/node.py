@@ -63,7 +63,7 @@ from . import node_params as NP
 from .model import COMPILED, warm_up
 from .params import SPECS, ParameterError, from_flat
 from .plant import ActuatorPlant
-from .scheduler import ABSURD_FACTOR, DERATE_ERROR_FRACTION, Health, JointCommand, Scheduler, SchedulerConfig  # noqa: F401
+from .scheduler import Health, JointCommand, Scheduler, SchedulerConfig
 
 NODE_NAME = "bldc_actuator"
 

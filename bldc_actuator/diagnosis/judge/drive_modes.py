@@ -118,7 +118,7 @@ def identify(ctx, params: ActuatorParams, window_s: float, *, wanted: bool = Tru
     w_before, w_after = float(np.mean(e_ho[0]["velocity"])), float(np.mean(e_ho[1]["velocity"]))
     worse_w = imp_w < -z * se_w and -imp_w > tolerance * w_before
     confirmed = imp > z * se and imp > tolerance * before and not worse_w
-    verdict = "confirmed" if confirmed else (f"worsens the simulated velocity" if worse_w else "not confirmed")
+    verdict = "confirmed" if confirmed else ("worsens the simulated velocity" if worse_w else "not confirmed")
     sim.update({"channel": "current", "without": before, "with": after, "improvement": imp,
                 "noise_floor": z * se, "other_channel": "velocity", "other_channel_change": -imp_w,
                 "velocity_without": w_before, "velocity_with": w_after, "verdict": verdict, "windows": len(ho)})
