@@ -97,7 +97,8 @@ def test_speed_limit_of_a_parameter_set_and_what_to_change():
                 {"drive.current_controller": "pi"}):
         fixed = params.replace(**fix)
         assert P.current_loop_limit(fixed) is None or P.current_loop_limit(fixed).stable, fix
-    slower = {"drive.current_loop_rate": 0.97 * lim.rate_needed(), "drive.current_loop_delay": 1 / (0.97 * lim.rate_needed())}
+    f_slow = 0.97 * lim.rate_needed()
+    slower = {"drive.current_loop_rate": f_slow, "drive.current_loop_delay": 1 / f_slow}
     assert not P.current_loop_limit(params.replace(**slower)).stable
     # the PI law is not limited here; a slower bus keeps the motor inside the range
     assert P.current_loop_limit(params.replace(**{"drive.current_controller": "pi"})) is None

@@ -256,5 +256,6 @@ def test_a_form_whose_loop_diverges_at_the_recordings_speeds_is_neither_replayed
     # a file that states the complex-vector form there: its own replay diverges, and the check says so
     r = drive_feedforward.identify(ctx, nominal.replace(**drive_feedforward.fields(cv)), tr, ho, 0.1)
     assert label in r["unstable_forms"]
-    text = " ".join([*(x.get("reason", "") for x in r["rejected"]), *(ev for x in r["findings"] for ev in x["evidence"])])
+    text = " ".join([*(x.get("reason", "") for x in r["rejected"]),
+                     *(ev for x in r["findings"] for ev in x["evidence"])])
     assert "the file's form diverges" in text

@@ -104,9 +104,10 @@ def test_windows_under_sets_a_batch_cannot_mix_are_simulated_in_groups():
 
 def test_no_mode_is_judged_where_the_models_complex_vector_loop_diverges():
     """A model whose drive runs the complex-vector current law (drive.current_controller: complex_vector, 1 kHz loop
-    bandwidth at 10 kHz, one period of delay) is unstable above ~61 rad/s (bldc_actuator/current_loop_stability.py); the recording
-    reaches the voltage limit near 180 rad/s. Replaying the limit windows with that model says nothing about the
-    limit modes (its current diverges): they are left out, and the check says why instead of naming a mode."""
+    bandwidth at 10 kHz, one period of delay) is unstable above ~61 rad/s (bldc_actuator/current_loop_stability.py);
+    the recording reaches the voltage limit near 180 rad/s. Replaying the limit windows with that model says nothing
+    about the limit modes (its current diverges): they are left out, and the check says why instead of naming a
+    mode."""
     from bldc_actuator.diagnosis.frame import simulate
     from bldc_actuator.params import current_loop_limit
 
