@@ -21,6 +21,10 @@ its change is reported), but a change of the controller LAW must also replay the
 windows and not worse on the held-out ones: the current is judged against its zero-phase low-passed reading,
 which favours the complex-vector law's smoother response even behind a PI drive.
 
+A form whose current loop diverges at the recording's highest speed (the complex-vector law with its computation
+delay beyond its stable range, :func:`..params.current_loop_limit`) is neither replayed nor proposed; the result says
+so (``unstable_forms``), and so does the evidence when the file's own form diverges there.
+
 :func:`.simulate.window_start` starts each form's integrator in its own steady state. One entry point, plain data
 out: :func:`identify`; the finding's effect is ``drive_current_controller`` (the drive-side effect of the benchmark
 sets; ``drive_decoupling`` before, when it named the feed-forward flag alone), its ``updated_fields`` name the whole
