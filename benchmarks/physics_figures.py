@@ -9,7 +9,6 @@ import math
 import sys
 from pathlib import Path
 
-import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))
 from test_model import rich_params, step_size_errors  # noqa: E402  (the exact scenarios the tests use)

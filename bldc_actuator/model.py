@@ -43,6 +43,7 @@ from __future__ import annotations
 import cmath
 import math
 import struct
+import warnings
 from collections import namedtuple
 from dataclasses import dataclass, fields
 from types import SimpleNamespace
@@ -52,7 +53,7 @@ import numpy as np
 
 from . import effects, frames, kernel
 from .kernel import COMPILED, COEF_DTYPE, STATE_DTYPE, warm_up  # noqa: F401  (public)
-from .params import ActuatorParams, controller_motor
+from .params import ActuatorParams, ParameterWarning, controller_motor, current_loop_warning
 from .profiles import SimResult  # noqa: F401  (public: Actuator.run returns it)
 
 TWO_PI = 2.0 * math.pi
@@ -223,6 +224,15 @@ class _Coeffs:
         th = kernel.thermal_matrices(cs["R_wh"], cs["R_ha"], cs["C_w"], cs["C_h"], self.tick_ns * 1e-9)
         cs["th_tick"] = np.column_stack(th)
         return cs
+
+
+def _warn_current_loop(params: ActuatorParams) -> None:
+    """A ``ParameterWarning`` when the motor can outrun the complex-vector current loop
+    (:func:`~bldc_actuator.params.current_loop_warning`): what a user of one actuator (``simulate``, the node's
+    plant, the Python API) must notice before a run at high speed diverges."""
+    msg = current_loop_warning(params)
+    if msg:
+        warnings.warn(msg, ParameterWarning, stacklevel=3)
 
 
 def thermal_step_matrices(thermal, h: float):
@@ -507,6 +517,7 @@ class Actuator(_Base):
 
     def __init__(self, params: ActuatorParams | None = None, state: ActuatorState | None = None):
         self.params = params if params is not None else ActuatorParams()
+        _warn_current_loop(self.params)
         th = self.params.thermal
         self._init_kernel([self.params], th.initial_winding_temperature, th.initial_housing_temperature)
         self._v_mode = False
@@ -552,6 +563,8 @@ class Actuator(_Base):
         """Replace the parameters; the state carries on (bus voltage, limits, load, ambient...). A transmission
         that turns compliant starts with its load where the rigid one held it (:meth:`_seat_load`)."""
         was = bool(self._c.compliant)
+        if params.drive != self.params.drive or params.motor != self.params.motor:
+            _warn_current_loop(params)
         self.params = params
         self._new_coeffs([params])
         if not was:

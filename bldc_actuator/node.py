@@ -61,9 +61,9 @@ from std_msgs.msg import Empty, Float64, Float64MultiArray, MultiArrayDimension
 
 from . import node_params as NP
 from .model import COMPILED, warm_up
-from .params import SPECS, ParameterError, from_flat
+from .params import SPECS, ParameterError, current_loop_warning, from_flat
 from .plant import ActuatorPlant
-from .scheduler import ABSURD_FACTOR, DERATE_ERROR_FRACTION, Health, JointCommand, Scheduler, SchedulerConfig  # noqa: F401
+from .scheduler import Health, JointCommand, Scheduler, SchedulerConfig
 
 NODE_NAME = "bldc_actuator"
 
@@ -203,6 +203,10 @@ class ActuatorNode(Node):
         except BaseException:
             self.destroy_node()
             raise
+        for name, p in joint_params.items():   # a current loop the motor can outrun diverges at speed: say so
+            msg = current_loop_warning(p)
+            if msg:
+                self.get_logger().warning(f"joint {name}: {msg}")
         config = SchedulerConfig(
             period_ns=period_ns, time_factor=nv["node.time_factor"], lock_step=nv["node.lock_step"],
             watchdog_ns=int(round(nv["node.watchdog_timeout"] * 1e9)),

@@ -369,14 +369,43 @@ def outside_usual_range(spec: ParameterSpec, value: Any) -> bool:
 
 
 def sanity_warnings(params: "ActuatorParams") -> list[str]:
-    """Every field whose value lies outside its usual range, in words (accepted: bounds are sanity limits)."""
+    """Every field whose value lies outside its usual range, in words (accepted: bounds are sanity limits), and
+    a complex-vector current loop the motor can outrun (:func:`current_loop_warning`)."""
     out = []
     for name, value in to_flat(params).items():
         spec = SPECS[name]
         if outside_usual_range(spec, value):
             out.append(f"{name} = {value:g} {spec.unit} is outside its usual range "
                        f"{_interval(*spec.range, spec.lo_open)} (accepted; check the unit if unexpected)".replace("  ", " "))
+    loop = current_loop_warning(params)
+    if loop:
+        out.append(loop)
     return out
+
+
+def current_loop_limit(params: "ActuatorParams"):
+    """The stable speed range of the drive's current loop, :class:`.current_loop_stability.SpeedLimit` (the
+    eigenvalues of the kernel's tick-to-tick closed loop with its computation delay), for
+    ``drive.current_controller: complex_vector``; None for ``pi`` (stable far beyond: not analysed here)."""
+    d, m = params.drive, params.motor
+    if d.current_controller != "complex_vector":
+        return None
+    from . import current_loop_stability
+
+    return current_loop_stability.speed_limit(
+        pole_pairs=m.pole_pairs, phase_resistance=m.phase_resistance, q_inductance=m.q_inductance,
+        controller_inductance=controller_motor(params)[1], bandwidth=d.current_loop_bandwidth,
+        rate=d.current_loop_rate, delay=d.current_loop_delay, feedforward=d.decoupling_enabled,
+        bus_voltage=d.bus_voltage, winding=m.winding, torque_constant_q=m.torque_constant_q,
+        modulation_limit=d.modulation_limit, gear_ratio=params.gear.gear_ratio)
+
+
+def current_loop_warning(params: "ActuatorParams") -> str | None:
+    """In words, when the motor's no-load speed at the bus voltage lies beyond the complex-vector current loop's
+    stable range (:func:`current_loop_limit`): the fields, the limit in rad/s and rpm, what to change. Accepted (a
+    drive may never run that fast), but a simulation that gets there diverges."""
+    lim = current_loop_limit(params)
+    return None if lim is None or lim.stable else lim.message()
 
 
 def from_flat(values: dict[str, Any], *, base: ActuatorParams | None = None) -> ActuatorParams:

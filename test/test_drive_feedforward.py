@@ -8,13 +8,14 @@ simulate the held-out windows better with the updated parameters, because of the
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from bldc_actuator.diagnosis import drive_feedforward
 from bldc_actuator.diagnosis.frame import equation_error as ee
 from bldc_actuator.diagnosis.frame import simulate
 from bldc_actuator.diagnosis.pipeline import diagnose
-from bldc_actuator.params import ActuatorParams
+from bldc_actuator.params import ActuatorParams, current_loop_limit
 
 from test_drive_modes import NOMINAL, steps_recording
 
@@ -40,7 +41,8 @@ def test_identify_names_the_recording_drive_feedforward(truth, file):
     assert s["with"] < s["without"] - s["noise_floor"] and s["candidate"] is truth
     tr = s["training_current_error"]
     assert tr[drive_feedforward._label(truth)] < tr[drive_feedforward._label(file)]
-    assert tr[drive_feedforward._label(truth)] < tr[drive_feedforward._label(("complex_vector", False))]
+    # the complex-vector form (no delay, 1 kHz: stable below ~330 rad/s) is not replayed on these ~640 rad/s steps
+    assert drive_feedforward._label(("complex_vector", False)) in r["unstable_forms"]
 
 
 @pytest.mark.parametrize("decoupling", [True, False])
@@ -227,3 +229,33 @@ def test_the_updated_file_names_the_identified_form():
     assert (up.drive.current_controller, up.drive.decoupling_enabled) == ("complex_vector", False)
     ho = d["compare"]["replay"]["holdout"]
     assert ho["after"]["velocity_rms"] < 0.5 * ho["before"]["velocity_rms"]
+
+
+def test_a_form_whose_loop_diverges_at_the_recordings_speeds_is_neither_replayed_nor_proposed():
+    """The complex-vector law with a one-period delay (250 Hz at 10 kHz, 21 pole pairs) is unstable above ~258 rad/s
+    (bldc_actuator/current_loop_stability.py); a PI drive's recording on a 200 V bus reaches ~640 rad/s. Replayed
+    there, the complex-vector form's current diverges (tens of amperes of error against 0.13 A for the recording's
+    own drive): the drive check leaves it out and says why, in its result and in its evidence."""
+    base = FILE.replace(**{"drive.current_loop_delay": 1e-4, "drive.current_loop_bandwidth": 250.0})
+    truth = base.replace(**drive_feedforward.fields(("pi", False)))
+    nominal = base.replace(**drive_feedforward.fields(("pi", True)))
+    cv = ("complex_vector", False)
+    ctx = ee.prepare([(steps_recording(truth, duration=8.0, seed=7), False)], nominal, fc=None, holdout=0.3)
+    limit = current_loop_limit(nominal.replace(**drive_feedforward.fields(cv)))
+    assert drive_feedforward.recording_speed(ctx) > 2 * limit.speed_limit
+    tr, ho = simulate.windows(ctx, 0.1, 60, "train"), simulate.windows(ctx, 0.1, 60, "holdout")
+    e = simulate.window_errors(ctx, [truth, nominal.replace(**drive_feedforward.fields(cv))], tr, 0.1)
+    assert np.mean(e[1]["current"]) > 50 * np.mean(e[0]["current"])          # the replay diverges
+    r = drive_feedforward.identify(ctx, nominal, tr, ho, 0.1)
+    label = drive_feedforward._label(cv)
+    assert label in r["unstable_forms"] and f"{limit.speed_limit:.4g} rad/s" in r["unstable_forms"][label]
+    assert label not in r["simulation"]["training_current_error"]
+    (f,) = r["findings"]                       # the recording's drive is still named
+    assert f["updated_fields"] == drive_feedforward.fields(("pi", False))
+    assert any("not replayed: " + label in ev for ev in f["evidence"])
+    # a file that states the complex-vector form there: its own replay diverges, and the check says so
+    r = drive_feedforward.identify(ctx, nominal.replace(**drive_feedforward.fields(cv)), tr, ho, 0.1)
+    assert label in r["unstable_forms"]
+    text = " ".join([*(x.get("reason", "") for x in r["rejected"]),
+                     *(ev for x in r["findings"] for ev in x["evidence"])])
+    assert "the file's form diverges" in text

@@ -100,3 +100,32 @@ def test_windows_under_sets_a_batch_cannot_mix_are_simulated_in_groups():
     n = len(starts)
     np.testing.assert_array_equal(both["sim_i"][:, :n], alone["sim_i"])
     assert np.max(np.abs(both["sim_v"][:, n:] - alone["sim_v"])) > 1e-3      # the delay acts
+
+
+def test_no_mode_is_judged_where_the_models_complex_vector_loop_diverges():
+    """A model whose drive runs the complex-vector current law (drive.current_controller: complex_vector, 1 kHz loop
+    bandwidth at 10 kHz, one period of delay) is unstable above ~61 rad/s (bldc_actuator/current_loop_stability.py);
+    the recording reaches the voltage limit near 180 rad/s. Replaying the limit windows with that model says nothing
+    about the limit modes (its current diverges): they are left out, and the check says why instead of naming a
+    mode."""
+    from bldc_actuator.diagnosis.frame import simulate
+    from bldc_actuator.params import current_loop_limit
+
+    truth = NOMINAL.replace(**{"drive.voltage_limit_mode": "d_priority"})
+    model = NOMINAL.replace(**{"drive.current_controller": "complex_vector", "drive.decoupling_enabled": False,
+                               "drive.current_loop_delay": 1e-4})
+    lim = current_loop_limit(model)
+    sig = steps_recording(truth, duration=20.0, seed=1)
+    ctx = ee.prepare([(sig, False)], model, fc=None, holdout=0.3)
+    assert float(np.max(np.abs(ctx.sig["omega_s"]))) > 2 * lim.speed_limit
+    # the model's replay there departs from the recording more than the same model with the PI law on every
+    # window (up to 2x: the voltage circle bounds the divergence where the demand exceeds it)
+    starts = [s for s in simulate.windows(ctx, 0.1, 10 ** 9, "train")
+              if abs(ctx.sig["omega_s"][s]) > 1.5 * lim.speed_limit]
+    e_cv, e_pi = simulate.window_errors(ctx, [model, model.replace(**{"drive.current_controller": "pi"})], starts[:10],
+                                        0.1)
+    assert np.all(e_cv["current"] > e_pi["current"]) and np.mean(e_cv["current"]) > 1.5 * np.mean(e_pi["current"])
+    r = drive_modes.identify(ctx, model, 0.1)
+    assert not r["findings"]
+    (nc,) = r["not_checkable"]
+    assert "complex_vector is unstable" in nc["reason"] and f"{lim.speed_limit:.4g} rad/s" in nc["reason"]

@@ -8,9 +8,7 @@ from __future__ import annotations
 import json
 import math
 import os
-import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np

@@ -142,6 +142,6 @@ def test_a_true_torque_constant_behind_a_drive_without_feed_forward_is_judged_by
     # closed-loop replay then runs that drive: there the true K improves the simulated speed too (before the
     # identification the file's drive made it worse, 0.62 -> 1.06 rad/s)
     assert rep.updated_params.drive.decoupling_enabled is False
-    assert rep.finding("drive_decoupling")["simulation"]["verdict"] == "confirmed"
+    assert rep.finding("drive_current_controller")["simulation"]["verdict"] == "confirmed"
     closed = sim["closed_loop_replay"]
     assert closed["verdict"] == "confirmed" and closed["with"] < closed["without"]

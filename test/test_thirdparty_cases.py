@@ -33,8 +33,8 @@ from benchmarks.concealed import thirdparty as T  # noqa: E402
 def _truth_edits(case):
     """Edits of a case that change its truth or its nominal file but not what its simulation reads."""
     return [replace(case, story=case.story + " (reworded)"),
-            replace(case, effects=case.effects + ("drive_decoupling",),
-                    truth={**case.truth, "drive_decoupling": {"decoupling_enabled": False}}),
+            replace(case, effects=case.effects + ("drive_current_controller",),
+                    truth={**case.truth, "drive_current_controller": {"decoupling_enabled": False}}),
             replace(case, alias_ok={"dead_time": ("resistance_error",)}),
             replace(case, channel="voltage_q" if case.channel == "current" else "current"),
             replace(case, nominal={**case.nominal, "drive.decoupling_enabled": True}),
@@ -187,66 +187,93 @@ def test_ensure_simulates_only_what_moved_and_rewrites_every_truth(tmp_path):
 def test_nominal_files_state_each_drive_as_it_is():
     """motulator's current controller is a complex-vector PI without back-EMF feed-forward: the nominal file says
     so, except in the cases that hide exactly that (their file claims a d/q PI with the feed-forward; truth:
-    drive_decoupling, the form complex_vector without feed-forward). The drive written around GEM is a PI that
-    feeds the back-EMF and the cross-coupling forward: its file says pi, true."""
+    drive_current_controller, the form complex_vector without feed-forward). The drive written around GEM is a PI
+    that feeds the back-EMF and the cross-coupling forward: its file says pi, true."""
     for case in T.CASES:
         d = T.nominal_params(case).drive
-        if "drive_decoupling" in case.effects:
+        if "drive_current_controller" in case.effects:
             assert (d.current_controller, d.decoupling_enabled) == ("pi", True)
-            assert case.truth["drive_decoupling"] == {"drive_form": "complex_vector without feed-forward",
-                                                      "current_controller": "complex_vector",
-                                                      "decoupling_enabled": False}
+            assert case.truth["drive_current_controller"] == {
+                "drive_form": "complex_vector without feed-forward", "current_controller": "complex_vector",
+                "decoupling_enabled": False}
         else:
             assert (d.current_controller, d.decoupling_enabled) == ("complex_vector", False), case.name
-    assert {c.name for c in T.CASES if "drive_decoupling" in c.effects} == {"tp_drive_ff", "tp_coulomb_drive_ff"}
-    assert set(T.get_case("tp_coulomb_drive_ff").effects) == {"coulomb_friction", "drive_decoupling"}
+    drive_cases = {c.name for c in T.CASES if "drive_current_controller" in c.effects}
+    assert drive_cases == {"tp_drive_ff", "tp_coulomb_drive_ff"}
+    assert set(T.get_case("tp_coulomb_drive_ff").effects) == {"coulomb_friction", "drive_current_controller"}
     assert len({c.seed for c in T.CASES}) == len(T.CASES)          # every case its own seed
     for case in G.CASES:
         assert G.nominal_params(case).drive.decoupling_enabled is True
         assert G.nominal_params(case).drive.current_controller == "pi"
-        assert "drive_decoupling" not in case.effects
+        assert "drive_current_controller" not in case.effects
 
 
-def test_scoring_counts_the_drive_decoupling_finding():
-    truth = {"case": "tp_coulomb_drive_ff", "effects": ["coulomb_friction", "drive_decoupling"],
+def test_scoring_counts_the_drive_current_controller_finding():
+    truth = {"case": "tp_coulomb_drive_ff", "effects": ["coulomb_friction", "drive_current_controller"],
              "truth": {"coulomb_friction": {"coulomb_friction": 0.02},
-                       "drive_decoupling": {"decoupling_enabled": False}}}
-    finding = {"effect": "drive_decoupling", "parameters": {"decoupling_enabled": False},
+                       "drive_current_controller": {"decoupling_enabled": False}}}
+    finding = {"effect": "drive_current_controller", "parameters": {"decoupling_enabled": False},
                "held_out": {"before": 0.03, "after": 0.02}}
     coulomb = {"effect": "coulomb_friction", "parameters": {"coulomb_friction": 0.0198}}
     s = scoring.score_case(truth, {"findings": [coulomb, finding]}, {})
     assert s.ok and not s.false_positives
-    dd = next(e for e in s.effects if e.effect == "drive_decoupling")
+    dd = next(e for e in s.effects if e.effect == "drive_current_controller")
     assert dd.value_correct is True and dd.estimate is False and dd.rel_error is None
     assert scoring.summarise([s])["parameters_scored"] == 1          # the flag is not a relative error
     assert "false" in scoring.rows([s], {"tp_coulomb_drive_ff": {}})[0][5]
     # a flag the wrong way round, or a number where the flag belongs, is not a correct estimate
     wrong = dict(finding, parameters={"drive.decoupling_enabled": True})
     assert next(e for e in scoring.score_case(truth, {"findings": [coulomb, wrong]}, {}).effects
-                if e.effect == "drive_decoupling").value_correct is False
+                if e.effect == "drive_current_controller").value_correct is False
     number = dict(finding, parameters={"decoupling_enabled": 0.0})
     assert next(e for e in scoring.score_case(truth, {"findings": [coulomb, number]}, {}).effects
-                if e.effect == "drive_decoupling").estimate is None
+                if e.effect == "drive_current_controller").estimate is None
     # missed on the combined case: counted as missed, Coulomb still scored
     s = scoring.score_case(truth, {"findings": [coulomb]}, {})
-    assert s.missed == ["drive_decoupling"] and not s.ok
+    assert s.missed == ["drive_current_controller"] and not s.ok
     # where the file is right about the drive, naming it is an extra / a false positive as before
     plain = {"case": "tp_null", "effects": [], "truth": {}}
-    assert scoring.score_case(plain, {"findings": [finding]}, {}).false_positives == ["drive_decoupling"]
+    assert scoring.score_case(plain, {"findings": [finding]}, {}).false_positives == ["drive_current_controller"]
 
 
 def test_scoring_counts_the_drive_form_the_finding_names():
     """The third-party drive cases' truth is the drive FORM (controller law + feed-forward): a finding that names
     complex_vector without feed-forward is correct; one that only clears the feed-forward flag of a PI is not."""
-    truth = {"case": "tp_drive_ff", "effects": ["drive_decoupling"], "truth": {"drive_decoupling": T.DRIVE_TRUTH}}
-    right = {"effect": "drive_decoupling", "parameters": {"drive_form": "complex_vector without feed-forward",
-                                                         "current_controller": "complex_vector",
-                                                         "decoupling_enabled": False}}
-    composed = {"effect": "drive_decoupling", "parameters": {"current_controller": "complex_vector",
-                                                            "decoupling_enabled": False}}
-    flag_only = {"effect": "drive_decoupling", "parameters": {"decoupling_enabled": False}}
+    truth = {"case": "tp_drive_ff", "effects": ["drive_current_controller"],
+             "truth": {"drive_current_controller": T.DRIVE_TRUTH}}
+    right = {"effect": "drive_current_controller", "parameters": {"drive_form": "complex_vector without feed-forward",
+                                                                 "current_controller": "complex_vector",
+                                                                 "decoupling_enabled": False}}
+    composed = {"effect": "drive_current_controller", "parameters": {"current_controller": "complex_vector",
+                                                                    "decoupling_enabled": False}}
+    flag_only = {"effect": "drive_current_controller", "parameters": {"decoupling_enabled": False}}
     for f, ok in ((right, True), (composed, True), (flag_only, False)):
         s = scoring.score_case(truth, {"findings": [f]}, {})
         assert s.ok and not s.false_positives
         (e,) = s.effects
         assert e.parameter == "drive_form" and e.value_correct is ok, (f, e)
+
+
+def test_reports_and_truths_written_under_the_former_name_score_under_todays():
+    """The drive-side finding was called ``drive_decoupling`` until it named the whole current-controller form
+    (``drive_current_controller``): a report, or a truth file, written before the rename is scored as today's, so an
+    old run's findings count as found (not as a miss plus an extra)."""
+    from bldc_actuator.diagnosis import drive_feedforward
+
+    assert drive_feedforward.EFFECT == "drive_current_controller"
+    assert scoring.RENAMED_EFFECTS == drive_feedforward.FORMER_EFFECTS
+    new_truth = {"case": "tp_drive_ff", "effects": ["drive_current_controller"],
+                 "truth": {"drive_current_controller": T.DRIVE_TRUTH}}
+    old_truth = {"case": "tp_drive_ff", "effects": ["drive_decoupling"], "truth": {"drive_decoupling": T.DRIVE_TRUTH}}
+    params = {"drive_form": "complex_vector without feed-forward", "current_controller": "complex_vector",
+              "decoupling_enabled": False}
+    old_report = {"findings": [{"effect": "drive_decoupling", "parameters": params}],
+                  "rejected": [{"effect": "drive_decoupling", "reason": "x"}]}
+    new_report = {"findings": [{"effect": "drive_current_controller", "parameters": params}]}
+    for truth in (new_truth, old_truth):
+        for report in (old_report, new_report):
+            s = scoring.score_case(truth, report, {})
+            assert s.ok and s.found == ["drive_current_controller"] and not s.false_positives, (truth, report)
+            assert s.effects[0].value_correct is True
+    # the input is not modified
+    assert old_report["findings"][0]["effect"] == "drive_decoupling" and old_truth["effects"] == ["drive_decoupling"]

@@ -171,7 +171,7 @@ EXTRACTORS = {
     "voltage_limit_ratio": _voltage_ratio,
     "voltage_limit_mode": lambda p, n: _get_str(p, "voltage_limit_mode", "drive.voltage_limit_mode", "mode"),
     "housing_to_ambient_resistance": lambda p, n: _get(p, "housing_to_ambient_resistance", "R_ha"),
-    # the drive-side finding drive_decoupling (diagnosis/drive_feedforward.py): the flag it writes back
+    # the drive-side finding drive_current_controller (diagnosis/drive_feedforward.py): the flag it writes back
     "decoupling_enabled": lambda p, n: _get_bool(p, "decoupling_enabled", "drive.decoupling_enabled"),
     # ... and the drive form it names (current controller + feed-forward), e.g. "complex_vector without feed-forward"
     "drive_form": lambda p, n: _drive_form(p),
@@ -241,8 +241,34 @@ class CaseScore:
         return d
 
 
+#: effect names the diagnosis used before -> today's (bldc_actuator.diagnosis.drive_feedforward.FORMER_EFFECTS):
+#: a report or a truth file written before the rename is scored under the new name
+RENAMED_EFFECTS = {"drive_decoupling": "drive_current_controller"}
+
+
+def _renamed(effect):
+    return RENAMED_EFFECTS.get(effect, effect)
+
+
+def _current_names(truth: dict, report: dict | None) -> tuple[dict, dict | None]:
+    """``truth`` and ``report`` with every former effect name (:data:`RENAMED_EFFECTS`) replaced by today's."""
+    if any(e in RENAMED_EFFECTS for e in truth.get("effects", ())):
+        truth = dict(truth, effects=[_renamed(e) for e in truth["effects"]],
+                     truth={_renamed(k): v for k, v in (truth.get("truth") or {}).items()},
+                     alias_ok={_renamed(k): [_renamed(x) for x in v] for k, v in (truth.get("alias_ok") or {}).items()})
+    if report is not None:
+        def fix(items):
+            return [dict(x, effect=_renamed(x["effect"])) if isinstance(x, dict) and x.get("effect") in RENAMED_EFFECTS
+                    else x for x in items or []]
+        report = dict(report, findings=fix(report.get("findings")), rejected=fix(report.get("rejected")),
+                      aliases=[dict(g, effects=[_renamed(e) for e in g.get("effects", [])]) if isinstance(g, dict)
+                               else g for g in report.get("aliases") or []])
+    return truth, report
+
+
 def score_case(truth: dict, report: dict | None, nominal_flat: dict, *, wall_time: float | None = None,
                error: str | None = None) -> CaseScore:
+    truth, report = _current_names(truth, report)
     hidden = list(truth["effects"])
     conc = truth.get("concealment", {})
     if report is None:

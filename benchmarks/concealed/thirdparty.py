@@ -22,7 +22,7 @@ the realized voltage, and it adds NO back-EMF or cross-coupling feed-forward (th
 see docs/benchmark.md), so the nominal file says ``drive.current_controller: complex_vector`` and
 ``drive.decoupling_enabled: false`` (this project's kernel runs that law: docs/physics.md); the cases
 ``tp_drive_ff`` and ``tp_coulomb_drive_ff`` hide it (their file says ``pi`` with feed-forward: the hidden drive-side
-effect ``drive_decoupling``, scored on the drive form the finding names).
+effect ``drive_current_controller``, scored on the drive form the finding names).
 
 The recordings are made by :mod:`.thirdparty_sim` from each case's :func:`recording_spec` and cached per case under
 that key (:mod:`.case_kit`); the truth and nominal files are written from the case definition on every run.
@@ -117,15 +117,15 @@ CASES: tuple[TPCase, ...] = (
     TPCase("tp_resistance_loaded", ("resistance_error",), "phase resistance 40 % above the nominal, under a known "
            "0.25 N·m load", {"resistance_error": {"phase_resistance": 0.182}}, plant={"R_s": 0.182, "tau_ext": 0.25},
            nominal={"load.load_torque": 0.25}, seed=12, channel="voltage_q"),
-    TPCase("tp_drive_ff", ("drive_decoupling",), "the parameter file says the drive is a d/q PI that feeds the "
+    TPCase("tp_drive_ff", ("drive_current_controller",), "the parameter file says the drive is a d/q PI that feeds the "
            "back-EMF and the cross-coupling forward (drive.current_controller: pi, drive.decoupling_enabled: true); "
            "motulator's is a complex-vector PI without feed-forward (its integrator, driven by the realized "
            "voltage, carries the back-EMF); the plant is the nominal one",
-           {"drive_decoupling": DRIVE_TRUTH}, nominal=FILE_DRIVE_FORM, seed=13),
-    TPCase("tp_coulomb_drive_ff", ("coulomb_friction", "drive_decoupling"), "Coulomb-like load friction 0.02 N·m "
-           "(tanh, 0.05 rad/s) AND a parameter file that says the drive is a d/q PI with back-EMF feed-forward "
-           "(it is motulator's complex-vector PI, without feed-forward)",
-           {"coulomb_friction": {"coulomb_friction": 0.02}, "drive_decoupling": DRIVE_TRUTH},
+           {"drive_current_controller": DRIVE_TRUTH}, nominal=FILE_DRIVE_FORM, seed=13),
+    TPCase("tp_coulomb_drive_ff", ("coulomb_friction", "drive_current_controller"), "Coulomb-like load friction "
+           "0.02 N·m (tanh, 0.05 rad/s) AND a parameter file that says the drive is a d/q PI with back-EMF "
+           "feed-forward (it is motulator's complex-vector PI, without feed-forward)",
+           {"coulomb_friction": {"coulomb_friction": 0.02}, "drive_current_controller": DRIVE_TRUTH},
            plant={"F_c": 0.02}, nominal=FILE_DRIVE_FORM, seed=14),
 )
 
@@ -216,7 +216,7 @@ def hidden_term(case: TPCase, sig: dict, nominal) -> dict:
         eff = (P["R_s"] - nominal.motor.phase_resistance) * iq
     elif "t_d" in P:
         eff = np.full_like(w, 1.5594 * P["t_d"] * NOMINAL_BASE["drive.pwm_frequency"] * NOMINAL_BASE["drive.bus_voltage"])
-    elif "drive_decoupling" in case.effects:
+    elif "drive_current_controller" in case.effects:
         eff = sig["i_q_ref"] - iq
     return kit.concealment(case, float(np.sqrt(np.mean(eff ** 2))), CURRENT_NOISE_Q, VOLTAGE_NOISE_Q)
 

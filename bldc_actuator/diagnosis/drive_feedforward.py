@@ -21,9 +21,14 @@ its change is reported), but a change of the controller LAW must also replay the
 windows and not worse on the held-out ones: the current is judged against its zero-phase low-passed reading,
 which favours the complex-vector law's smoother response even behind a PI drive.
 
+A form whose current loop diverges at the recording's highest speed (the complex-vector law with its computation
+delay beyond its stable range, :func:`..params.current_loop_limit`) is neither replayed nor proposed; the result says
+so (``unstable_forms``), and so does the evidence when the file's own form diverges there.
+
 :func:`.simulate.window_start` starts each form's integrator in its own steady state. One entry point, plain data
-out: :func:`identify`; the finding's effect is ``drive_decoupling`` (the drive-side effect of the benchmark sets),
-its ``updated_fields`` name the whole form (both fields).
+out: :func:`identify`; the finding's effect is ``drive_current_controller`` (the drive-side effect of the benchmark
+sets; ``drive_decoupling`` before, when it named the feed-forward flag alone), its ``updated_fields`` name the whole
+form (both fields).
 """
 
 from __future__ import annotations
@@ -33,10 +38,12 @@ from typing import Any
 
 import numpy as np
 
-from ..params import ActuatorParams
+from ..params import ActuatorParams, current_loop_limit
 from .frame import simulate
 
-EFFECT = "drive_decoupling"
+EFFECT = "drive_current_controller"
+#: the name the finding had before (reports written then say it; :data:`FORMER_EFFECTS` maps it)
+FORMER_EFFECTS = {"drive_decoupling": EFFECT}
 FIELD = "drive.decoupling_enabled"
 CONTROLLER_FIELD = "drive.current_controller"
 #: the drive forms a file can be wrong about: (current controller, feed-forward). motulator's complex-vector
@@ -80,6 +87,26 @@ def _spell(form: Form) -> str:
     return f"{CONTROLLER_FIELD}: {form[0]}, {FIELD}: {str(form[1]).lower()}"
 
 
+def recording_speed(ctx) -> float:
+    """The highest rotor speed [rad/s] of the recording (its low-passed speed, what the replays start from)."""
+    w = np.abs(np.asarray(ctx.sig.get("omega_s", ctx.sig.get("omega", [])), float))
+    w = w[np.isfinite(w)]
+    return float(np.max(w)) if len(w) else 0.0
+
+
+def unstable_on_recording(params: ActuatorParams, form: Form, speed: float) -> str | None:
+    """Why ``form`` cannot be emulated on a recording that reaches ``speed`` [rad/s]: the complex-vector law's
+    current loop diverges above its stable speed (:func:`..params.current_loop_limit`, the kernel's closed loop with
+    its computation delay); None where it is stable (and for the pi law)."""
+    lim = current_loop_limit(params.replace(**fields(form)))
+    if lim is None or lim.stable_at([speed]):
+        return None
+    return (f"{_label(form)} is unstable above {lim.speed_limit:.4g} rad/s in this simulator (p*omega*T_c = "
+            f"{lim.angle_limit:.3g} rad with drive.current_loop_bandwidth {lim.bandwidth:g} Hz at "
+            f"drive.current_loop_rate {lim.rate:g} Hz and {lim.delay_fraction:.3g} period(s) of delay) and the "
+            f"recording reaches {speed:.4g} rad/s")
+
+
 def identify(ctx, params: ActuatorParams, starts_train: list[int], starts_holdout: list[int], window_s: float, *,
              z: float = 2.0, tolerance: float = 0.05, findings: tuple[str, ...] = ()) -> dict[str, Any]:
     """``{"findings": [...], "rejected": [...], "not_checkable": [...], "simulation": {...} | None,
@@ -104,7 +131,16 @@ def identify(ctx, params: ActuatorParams, starts_train: list[int], starts_holdou
                                                f"{MIN_WINDOWS} each needed)"})
         return out
     nominal = form_of(params)
-    others = [f for f in FORMS if f != nominal]
+    # a form whose current loop diverges at the recording's speeds is neither replayed nor proposed
+    speed = recording_speed(ctx)
+    unstable = {f: why for f in dict.fromkeys((nominal, *FORMS)) if (why := unstable_on_recording(params, f, speed))}
+    others = [f for f in FORMS if f != nominal and f not in unstable]
+    if unstable:
+        out["unstable_forms"] = {_label(f): why for f, why in unstable.items()}
+    if not others:
+        out["not_checkable"].append({"effect": EFFECT, "needs": [],
+                                     "reason": "no other drive form can be replayed: " + "; ".join(unstable.values())})
+        return out
     sets = [params] + [params.replace(**fields(f)) for f in others]
     e_tr = simulate.window_errors(ctx, sets, tr, window_s)
     i_tr = [float(np.mean(e["current"])) for e in e_tr]
@@ -126,6 +162,10 @@ def identify(ctx, params: ActuatorParams, starts_train: list[int], starts_holdou
     train_txt = (f"{len(tr)} training windows replayed in closed loop{model}: simulated current error "
                  f"{_label(nominal)} (as the file says) {i_tr[0]:.3g} A, "
                  + ", ".join(f"{_label(f)} {e:.3g} A" for f, e in zip(others, i_tr[1:])) + " RMS")
+    if unstable:
+        sim["unstable_forms"] = dict(out["unstable_forms"])
+        train_txt += (" (" + "; ".join(("the file's form diverges: " if f == nominal else "not replayed: ") + why
+                                       for f, why in unstable.items()) + ")")
     sim["training_velocity_errors"] = {_label(nominal): w_tr_all[0],
                                        **{_label(f): e for f, e in zip(others, w_tr_all[1:])}}
     if not admissible or i_tr[best_k] >= i_tr[0]:

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from ...kernel import VOLTAGE_LIMIT_MODES
-from ...params import ActuatorParams
+from ...params import ActuatorParams, current_loop_limit
 from ..frame import simulate
 
 #: a sample counts as "at the voltage limit" when the model's steady voltage demand |(R i + K ω) + j p ω L i|
@@ -54,6 +54,23 @@ def _limit_windows(ctx, which: str, window_s: float, near: np.ndarray) -> list[i
     L = max(5, int(round(window_s * ctx.fs)))
     return simulate.thin([s for s in simulate.windows(ctx, window_s, 10 ** 9, which) if near[s:s + L + 1].any()],
                       MAX_WINDOWS)
+
+
+def _stable_windows(ctx, starts: list[int], window_s: float, params: ActuatorParams) -> tuple[list[int], str]:
+    """The windows whose speed stays inside the stable range of the model's current loop (a complex-vector law
+    diverges above it, :func:`...params.current_loop_limit`: its replay says nothing about the limit modes there),
+    and, when some are dropped, why."""
+    lim = current_loop_limit(params)
+    if lim is None or not starts:
+        return starts, ""
+    L = max(5, int(round(window_s * ctx.fs)))
+    w = np.abs(np.asarray(ctx.sig["omega_s"], float))
+    keep = [s for s in starts if lim.stable_at(w[s:s + L + 1])]
+    if len(keep) == len(starts):
+        return starts, ""
+    return keep, (f"{len(starts) - len(keep)} window(s) above {lim.speed_limit:.4g} rad/s left out: the model's "
+                  f"drive.current_controller complex_vector is unstable there (p*omega*T_c > {lim.angle_limit:.3g} rad "
+                  f"with drive.current_loop_bandwidth {lim.bandwidth:g} Hz at drive.current_loop_rate {lim.rate:g} Hz)")
 
 
 def _variants(params: ActuatorParams) -> dict[str, ActuatorParams]:
@@ -86,14 +103,18 @@ def identify(ctx, params: ActuatorParams, window_s: float, *, wanted: bool = Tru
                                                           "torque_command"]})
         return out
     near = _near_limit(ctx)
-    tr = _limit_windows(ctx, "train", window_s, near)
-    ho = _limit_windows(ctx, "holdout", window_s, near)
+    tr, why_tr = _stable_windows(ctx, _limit_windows(ctx, "train", window_s, near), window_s, params)
+    ho, why_ho = _stable_windows(ctx, _limit_windows(ctx, "holdout", window_s, near), window_s, params)
+    unstable = "; ".join(f"{side}: {why}" for side, why in (("training", why_tr), ("held-out", why_ho)) if why)
     if len(tr) < MIN_WINDOWS or len(ho) < MIN_WINDOWS:
         out["not_checkable"].append({
             "effect": name, "needs": [],
-            "reason": f"data does not reach the voltage limit often enough ({len(tr)} training and {len(ho)} "
-                      f"held-out {window_s:g} s windows where the voltage demand reaches {NEAR_LIMIT:.0%} "
-                      f"of the circle; {MIN_WINDOWS} each needed): the modes differ only there"})
+            "reason": (f"too few windows at the voltage limit inside the stable speed range of the model's current "
+                       f"loop ({len(tr)} training and {len(ho)} held-out {window_s:g} s windows; {MIN_WINDOWS} each "
+                       f"needed): {unstable}") if unstable else
+                      (f"data does not reach the voltage limit often enough ({len(tr)} training and {len(ho)} "
+                       f"held-out {window_s:g} s windows where the voltage demand reaches {NEAR_LIMIT:.0%} "
+                       f"of the circle; {MIN_WINDOWS} each needed): the modes differ only there")})
         return out
     nominal = params.drive.voltage_limit_mode
     variants = _variants(params)
@@ -103,6 +124,8 @@ def identify(ctx, params: ActuatorParams, window_s: float, *, wanted: bool = Tru
     best = min(modes, key=lambda m: scores[m])
     sim = {"training_windows": len(tr), "heldout_windows": len(ho), "window_s": window_s,
            "training_score": {m: round(v, 4) for m, v in scores.items()}, "nominal": nominal, "candidate": best}
+    if unstable:
+        sim["unstable_windows"] = unstable
     out["simulation"] = sim
     if best == nominal:
         out["rejected"].append({"effect": name, "form": "simulated at the voltage limit",
@@ -118,7 +141,7 @@ def identify(ctx, params: ActuatorParams, window_s: float, *, wanted: bool = Tru
     w_before, w_after = float(np.mean(e_ho[0]["velocity"])), float(np.mean(e_ho[1]["velocity"]))
     worse_w = imp_w < -z * se_w and -imp_w > tolerance * w_before
     confirmed = imp > z * se and imp > tolerance * before and not worse_w
-    verdict = "confirmed" if confirmed else (f"worsens the simulated velocity" if worse_w else "not confirmed")
+    verdict = "confirmed" if confirmed else ("worsens the simulated velocity" if worse_w else "not confirmed")
     sim.update({"channel": "current", "without": before, "with": after, "improvement": imp,
                 "noise_floor": z * se, "other_channel": "velocity", "other_channel_change": -imp_w,
                 "velocity_without": w_before, "velocity_with": w_after, "verdict": verdict, "windows": len(ho)})
