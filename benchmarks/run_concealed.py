@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+import warnings
 import os
 import platform
 import subprocess
@@ -228,7 +229,7 @@ def main(argv=None) -> int:
     held = heldout_option()
     log(f"\ndiagnose: {' '.join(_diagnose_cli()[1:])} (held-out recording "
         f"{'passed with ' + held if held else 'not passed: the CLI has no held-out option, it splits'})")
-    from bldc_actuator.params import load_yaml
+    from bldc_actuator.params import ParameterWarning, load_yaml
 
     scores = []
     failed = 0
@@ -236,7 +237,9 @@ def main(argv=None) -> int:
     for k, case in enumerate(cases, start=1):
         log(f"[{k}/{len(cases)}] {case.name}: hidden {', '.join(case.effects) or 'nothing'} ...")
         report, wall, err = run_case(args.data / case.name, run_dir / case.name, held, args.timeout, args.diagnose_arg)
-        nominal = load_yaml(args.data / case.name / "params.yaml").to_flat()
+        with warnings.catch_warnings():     # the case's diagnose run has printed its own parameter warnings
+            warnings.simplefilter("ignore", ParameterWarning)
+            nominal = load_yaml(args.data / case.name / "params.yaml").to_flat()
         s = scoring.score_case(truths[case.name], report, nominal, wall_time=wall, error=err)
         scores.append(s)
         failed += err is not None
