@@ -24,12 +24,12 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
-import warnings
 import os
 import platform
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
