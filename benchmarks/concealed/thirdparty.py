@@ -87,8 +87,9 @@ class TPCase:
 
 
 PSI_F = NOMINAL_BASE["motor.torque_constant_q"] / (SQRT3_2 * NOMINAL_BASE["motor.pole_pairs"])
-#: [N·m·s/rad] the known viscous load of tp_dead_time: ~1 A of q-current at the multisine's ~34 rad/s peaks
-DEAD_TIME_LOAD_B = 2.2e-3
+#: [N·m·s/rad] the known viscous load of tp_dead_time: 0.52 A of q-current at the slow triangle's 6 rad/s (twice
+#: motulator's chatter band), ~3.8 A at the multisine's peaks
+DEAD_TIME_LOAD_B = 6.5e-3
 
 CASES: tuple[TPCase, ...] = (
     TPCase("tp_null", (), "nothing hidden: motulator's speed-controlled PMSM drive, logged at 1 kHz", {}, seed=1),
@@ -104,10 +105,11 @@ CASES: tuple[TPCase, ...] = (
     TPCase("tp_inertia", ("inertia_error",), "the load's inertia was forgotten: J x 1.6",
            {"inertia_error": {"inertia_ratio": 1.6}}, plant={"J": 1.6 * 6.0e-5}, seed=6),
     TPCase("tp_dead_time", ("dead_time",), "inverter dead time 2 µs at 5 kHz PWM (0.24 V per leg), uncompensated, "
-           "driving a known viscous load 2.2e-3 N·m·s/rad (a fan- or pump-like drag in the file): |i_q| swings to "
-           "~1 A of both signs, beyond motulator's ~0.3 A chatter band", {"dead_time": {"dead_time": 2.0e-6}},
+           "driving a known viscous load 6.5e-3 N·m·s/rad (a fan- or pump-like drag in the file): |i_q| swings to "
+           "0.52 A at the slow triangle's 6 rad/s and ~3.8 A at the multisine's peaks, both signs, beyond motulator's "
+           "~0.25 A chatter band; a 4 s held-out part", {"dead_time": {"dead_time": 2.0e-6}},
            plant={"t_d": 2.0e-6, "B_visc": DEAD_TIME_LOAD_B}, nominal={"motor.viscous_damping": DEAD_TIME_LOAD_B},
-           seed=15, channel="voltage_q"),
+           heldout_s=4.0, seed=15, channel="voltage_q"),
     # the previous tp_dead_time, kept as a probe whose right answer is "not decidable": without a load the
     # currents stay inside the chatter band, where the leg error is the sliding-mode error that holds the phase
     # current near zero: its mean is linear in the current (a resistance, +0.8 ohm) and the rest follows the
