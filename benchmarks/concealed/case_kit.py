@@ -194,7 +194,8 @@ def write_truth(case, case_dir: Path, nominal, *, label: str, source: str, speci
     s = seeds(case)
     truth = {
         "case": case.name, "effects": list(case.effects), "story": case.story, "truth": case.truth,
-        "alias_ok": {k: list(v) for k, v in case.alias_ok.items()}, "source": source, **specifics,
+        "alias_ok": {k: list(v) for k, v in case.alias_ok.items()},
+        "not_decidable": list(getattr(case, "not_decidable", ())), "source": source, **specifics,
         "concealment": concealment(case, sig, nominal), "oracle": None,
         "recording_key": (case_dir / STAMP).read_text().strip(), "generation_seconds": generation_seconds(case_dir),
         "train": {"excitation": "speed: triangle + multisine", "duration_s": case.train_s, "seed": s["train"]},

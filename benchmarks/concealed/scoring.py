@@ -217,15 +217,27 @@ class CaseScore:
     simulated: str | None = None
     simulated_detail: str = ""
     alias_accepted: list[str] = field(default_factory=list)  #: of those, the case says the data cannot separate them
+    #: hidden effects the recording cannot decide by design (the truth's ``not_decidable``: a probe), ...
+    expected_not_decidable: list[str] = field(default_factory=list)
+    #: ... of those, what the report calls "not decidable" (right) and what it names all the same (wrong: it decided
+    #: what the data cannot)
+    not_decidable: list[str] = field(default_factory=list)
+    overdecided: list[str] = field(default_factory=list)
 
     @property
     def is_null(self) -> bool:
         return not self.hidden
 
     @property
+    def is_probe(self) -> bool:
+        """Every hidden effect is one the data cannot decide: the right answer is "not decidable"."""
+        return bool(self.hidden) and set(self.hidden) <= set(self.expected_not_decidable)
+
+    @property
     def ok(self) -> bool:
-        """Strict: every hidden effect named, nothing else named."""
-        return self.error is None and not self.missed and not self.false_positives
+        """Strict: every hidden effect named (or, where the truth says the data cannot decide it, reported "not
+        decidable" and not named), nothing else named."""
+        return self.error is None and not self.missed and not self.false_positives and not self.overdecided
 
     @property
     def ok_with_aliases(self) -> bool:
@@ -279,10 +291,15 @@ def score_case(truth: dict, report: dict | None, nominal_flat: dict, *, wall_tim
     for f in findings:
         if f["effect"] not in names:
             names.append(f["effect"])
-    missed = [e for e in hidden if e not in names]
+    expected_nd = [e for e in truth.get("not_decidable") or [] if e in hidden]
+    reported_nd = not_decidable_effects(report)
+    missed = [e for e in hidden if e not in names and not (e in expected_nd and e in reported_nd)]
     fps = [e for e in names if e not in hidden]
     cs = CaseScore(truth["case"], hidden, names, missed, fps, snr=conc.get("snr"), channel=conc.get("channel"),
-                   wall_time_s=wall_time, error=error, verdict_text=report.get("verdict"))
+                   wall_time_s=wall_time, error=error, verdict_text=report.get("verdict"),
+                   expected_not_decidable=expected_nd,
+                   not_decidable=[e for e in expected_nd if e in reported_nd and e not in names],
+                   overdecided=[e for e in expected_nd if e in names])
     cs.simulated, cs.simulated_detail = simulated_verdict(report)
     timing = report.get("timing")
     if isinstance(timing, dict):
@@ -329,6 +346,13 @@ def score_case(truth: dict, report: dict | None, nominal_flat: dict, *, wall_tim
     return cs
 
 
+def not_decidable_effects(report: dict) -> list[str]:
+    """The effects a report calls "not decidable" (the selection's rejected entries with ``verdict:
+    not_decidable``: large, but the held-out part cannot decide them)."""
+    return [r["effect"] for r in report.get("rejected") or []
+            if isinstance(r, dict) and r.get("verdict") == "not_decidable" and r.get("effect")]
+
+
 #: a simulated channel moves when its held-out error changes by more than this fraction
 SIM_MOVE = 0.01
 
@@ -371,7 +395,11 @@ def simulated_verdict(report: dict) -> tuple[str | None, str]:
 
 
 def summarise(scores: list[CaseScore]) -> dict:
-    effect_cases = [s for s in scores if not s.is_null]
+    """Counts over the cases. Probes (every hidden effect not decidable by design) are counted apart: their right
+    answer is "not decidable", so they enter neither the detection rate nor the effect cases; what they name is
+    still an extra."""
+    probes = [s for s in scores if s.is_probe]
+    effect_cases = [s for s in scores if not s.is_null and not s.is_probe]
     nulls = [s for s in scores if s.is_null]
     n_hidden = sum(len(s.hidden) for s in effect_cases)
     n_found = sum(len(s.hidden) - len(s.missed) for s in effect_cases)
@@ -391,7 +419,9 @@ def summarise(scores: list[CaseScore]) -> dict:
         "cases_correct_with_accepted_aliases": sum(s.ok_with_aliases for s in scores),
         "detected_or_alias_accepted": n_found + sum(len(s.alias_accepted) for s in effect_cases),
         "false_positives_on_nulls": sum(len(s.false_positives) for s in nulls),
-        "extra_effects_on_effect_cases": sum(len(s.false_positives) for s in effect_cases),
+        "extra_effects_on_effect_cases": sum(len(s.false_positives) for s in effect_cases + probes),
+        "not_decidable_probes": len(probes),
+        "not_decidable_right": sum(s.ok for s in probes),
         "parameters_scored": len(errs),
         "mean_parameter_error": sum(errs) / len(errs) if errs else None,
         "median_parameter_error": sorted(errs)[len(errs) // 2] if errs else None,
@@ -433,6 +463,10 @@ def rows(scores: list[CaseScore], truths: dict[str, dict]) -> list[list[str]]:
             verdict = "ERROR"
         elif s.is_null:
             verdict = "ok" if not s.false_positives else "FALSE POSITIVE"
+        elif s.is_probe:
+            verdict = ("ok: not decidable" if s.ok else
+                       f"decided what the data cannot ({', '.join(s.overdecided)} named)" if s.overdecided else
+                       "missed: not reported not decidable" if s.missed else "not decidable, but extra")
         else:
             verdict = "ok" if s.ok else ("missed" if s.missed and not s.false_positives else
                                         "extra" if not s.missed else "missed+extra")
@@ -500,6 +534,9 @@ def summary_text(summary: dict) -> str:
             f"false positives on the {summary['null_cases']} null cases: {summary['false_positives_on_nulls']}; "
             f"extra effects named on effect cases: {summary['extra_effects_on_effect_cases']}; missed but reported "
             f"as aliased with a named effect: {summary.get('missed_but_reported_aliased', 0)}\n"
+            + (f"'not decidable' probes (the data cannot decide their hidden effect by design): "
+               f"{summary['not_decidable_right']}/{summary['not_decidable_probes']} reported not decidable\n"
+               if summary.get("not_decidable_probes") else "") +
             f"main-parameter error: mean {pct(summary['mean_parameter_error'])}, median "
             f"{pct(summary['median_parameter_error'])} over {summary['parameters_scored']} scored parameters"
             + (f" (categorical: {summary['categorical_correct']}/{summary['categorical_scored']} exact)"

@@ -71,6 +71,9 @@ class Candidate:
     #: a candidate that is never fitted on its own but may hide behind these accepted effects (checked as an
     #: alias only for them, :func:`..selection.unexcited_aliases`); None: behind any effect sharing an equation
     hides_behind: tuple[str, ...] | None = None
+    #: (ctx) -> None | (why, what to do): the candidate's own reason when the held-out gate cannot decide it
+    #: (:func:`..selection._gate`), in place of "held-out too short" where the data, not its length, are at fault
+    undecided_why: Callable | None = None
 
 
 def _smooth_sign(x, eps):
@@ -185,11 +188,43 @@ def col_saturation(ctx):
     return {"mechanical": S["K"] * S["i_col"] * np.abs(S["i_col"])}
 
 
+def _sign_width(ctx, i) -> float:
+    """Width [A] the dead-time sign form is smoothed over: 3 x the current's content above the low-pass (sensor
+    noise, and the chatter of a drive whose sign is sampled once per control period) — the sign cannot be told
+    closer to zero than that."""
+    return max(3.0 * float(np.std(i - ctx.dec.lowpass(i))), 1e-3 * float(np.percentile(np.abs(i), 90)), 1e-6)
+
+
 def col_dead_time(ctx):
     S = ctx.sig
     i = S["i_col"]
-    eps = max(3.0 * float(np.std(i - ctx.dec.lowpass(i))), 1e-3 * float(np.percentile(np.abs(i), 90)), 1e-6)
-    return {"electrical": _smooth_sign(ctx.dec.lowpass(i), eps)}
+    return {"electrical": _smooth_sign(ctx.dec.lowpass(i), _sign_width(ctx, i))}
+
+
+#: the current's sign is not visible when the sign form's width exceeds this percentile of |low-passed i_q|
+DEAD_TIME_IN_BAND_PERCENTILE = 99.5
+
+
+def dead_time_in_band(ctx):
+    """Why a dead time cannot be decided when the current stays inside its chatter band: (reason, what to do), or
+    None. The sign form's smoothing width (:func:`_sign_width`) exceeds the 99.5th percentile of |low-passed
+    i_q|: over the whole recording the form is linear in the current, i.e. a resistance. Issue #14, motulator's
+    dead time without load (now ``tp_dead_time_in_band``): width 0.71 A for |i_q| <= 0.41 A; its sign sampled once
+    per 100 us control period makes the phase currents chatter period-2 and the leg error holds them near zero (a
+    sliding mode): its mean is linear in the current (a resistance, +0.80 ohm fitted, about L/T_s) and the rest
+    follows the per-period current signs, which no log at 1 kHz holds; given a resistance, no dead-time form of
+    the logged signals adds anything (ΔBIC <= -1.8)."""
+    if "i_q" not in ctx.sig:
+        return None
+    i = ctx.sig["i_q"]
+    width = _sign_width(ctx, i)
+    top = float(np.percentile(np.abs(ctx.dec.lowpass(i)), DEAD_TIME_IN_BAND_PERCENTILE))
+    if not width > top:
+        return None
+    return (f"the current stays inside the dead time's chatter band (its content above the low-pass, "
+            f"{width / 3:.2g} A RMS, covers |i_q| <= {top:.2g} A, the {DEAD_TIME_IN_BAND_PERCENTILE:g}th "
+            f"percentile): there the inverter's error is linear in the current, a resistance in disguise",
+            f"record with currents of both signs well beyond {width:.2g} A (a load, faster accelerations)")
 
 
 def col_dead_band(band: float):
@@ -1177,7 +1212,7 @@ def library() -> dict[str, Candidate]:
                   "inverter dead time: the applied voltage falls short by a constant times the sign of the current",
                   True, {"coulomb_friction": "friction acts on torque: compare the voltage equation at standstill "
                          "with current of both signs"},
-                  v_dead_time, excite_dead_time, params_dead_time))
+                  v_dead_time, excite_dead_time, params_dead_time, undecided_why=dead_time_in_band))
     add(Candidate("current_loop_delay", ("electrical",), ("voltage_q", "current", "velocity|position"),
                   "the recorded voltage leads the current by a delay (PWM / computation delay)", True,
                   {"inductance_error": "current steps recorded at a higher rate than the current loop"},

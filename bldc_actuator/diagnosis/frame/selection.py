@@ -51,6 +51,7 @@ class Evaluation:
     passed: bool
     reason: str
     undecided: bool = False      #: large effect, held-out part too short to decide
+    remedy: str = ""             #: what to do when undecided (the candidate's own, else the generic one)
 
     def summary(self) -> dict[str, Any]:
         return {"effect": self.effect, "form": self.variant.label, "delta_bic": round(self.dbic, 2),
@@ -326,6 +327,13 @@ def _gate(ctx: Context, cand: Candidate, best: Evaluation, base: Fit, weights, g
         best.reason = why
     elif best.dbic <= gate.bic_threshold:
         best.reason = f"ΔBIC {best.dbic:.1f} <= {gate.bic_threshold:g} (not supported by the training data)"
+    elif (own := cand.undecided_why(ctx) if cand.undecided_why is not None else None):
+        # the data cannot shape the candidate's form (e.g. a dead time whose current never leaves its chatter
+        # band: a resistance in disguise): neither found nor absent, whatever the held-out part says
+        best.undecided = True
+        best.reason = (f"not decidable: {own[0]} (ΔBIC {best.dbic:.1f}; held-out "
+                       f"{-100 * ho.get('rel', 0.0):+.2f}% RMS, t = {ho.get('t', 0.0):.1f})")
+        best.remedy = own[1]
     elif not ho.get("available"):
         best.reason = "no held-out data for this equation"
     elif ho["rel"] <= gate.min_heldout_gain:
@@ -339,11 +347,12 @@ def _gate(ctx: Context, cand: Candidate, best: Evaluation, base: Fit, weights, g
         # beyond the large-sample level, short of the few-chunk one (infinite below 4): the held-out part
         # cannot decide
         best.undecided = True
-        best.reason = (f"not decidable: held-out too short (the effect excites {ho['effective_chunks']:.1f} of "
-                       f"{ho['chunks']} chunks of {ho['chunk_s']:.2g} s; held-out -{100 * ho['rel']:.2f}% RMS, "
-                       f"t = {ho['t']:.1f}, " + (f"<= {ho['t_crit']:.2f} needed there" if math.isfinite(ho['t_crit'])
-                                                else f"a test needs >= {MIN_EFFECTIVE_CHUNKS:g}") + f", ΔBIC {best.dbic:.1f}); record a "
-                       f"longer held-out part with more varied motion")
+        test = (f"the effect excites {ho['effective_chunks']:.1f} of {ho['chunks']} chunks of {ho['chunk_s']:.2g} s; "
+                f"held-out -{100 * ho['rel']:.2f}% RMS, t = {ho['t']:.1f}, "
+                + (f"<= {ho['t_crit']:.2f} needed there" if math.isfinite(ho['t_crit'])
+                   else f"a test needs >= {MIN_EFFECTIVE_CHUNKS:g}") + f", ΔBIC {best.dbic:.1f}")
+        best.reason = (f"not decidable: held-out too short ({test}); record a longer held-out part with more "
+                       f"varied motion")
     elif ho["t"] <= ho["t_crit"]:
         best.reason = (f"held-out improvement {100 * ho['rel']:.2f}% not significant "
                        f"(t = {ho['t']:.1f} <= {ho['t_crit']:.2f} at {ho['effective_chunks']:.1f} effective chunks)")
@@ -404,7 +413,8 @@ def _rejected(last_eval: dict[str, Evaluation], accepted, aliases, early_rejecte
         out.append({"effect": name, "form": e.variant.label, "reason": reason,
                     "delta_bic": round(e.dbic, 2), "heldout_gain": round(e.heldout.get("rel", 0.0), 5),
                     "heldout_t": round(e.heldout.get("t", 0.0), 2),
-                    **({"verdict": "not_decidable", "heldout_chunks": e.heldout.get("chunks")} if e.undecided else {})})
+                    **({"verdict": "not_decidable", "heldout_chunks": e.heldout.get("chunks")} if e.undecided else {}),
+                    **({"remedy": e.remedy} if e.undecided and e.remedy else {})})
     return out + early_rejected + [{"effect": r["effect"], "form": r["form"], "reason": r["reason"]} for r in removed]
 
 
