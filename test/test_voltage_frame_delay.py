@@ -6,8 +6,8 @@ coordinates and applies it a computation delay later, so unless the drive advanc
 apparent back-EMF, a 0.1 s correlation time in the residual) and a 40 % resistance error stayed hidden. The delay
 is read from the d-axis equation (:func:`equation_error.frame_delay`), where the turned back-EMF is the largest
 term, and the q equation uses the voltage turned back by it. Recordings from the project's closed-loop actuator
-(which holds its voltage in rotor coordinates: no turn) whose logged voltages are turned forward by ``p ω d``, as
-such a drive logs them.
+(which holds its voltage in rotor coordinates: no turn) whose logged voltages are read d later and turned forward by
+``p ω d``, as such a drive logs them (the voltage it computed at the sample, which acts d later).
 """
 
 from __future__ import annotations
@@ -27,10 +27,13 @@ D = 1.5e-4      # [s] 1.5 loop periods: one period of computation delay plus hal
 
 
 def _logged_by_a_turning_drive(sig, p: ActuatorParams, d: float):
-    """The same recording as a drive that logs its voltage in the frame of the sampling instant would: the applied
-    d/q voltage turned forward by p ω d."""
-    ch = sig.channels
-    v = (ch["voltage_d"] + 1j * ch["voltage_q"]) * np.exp(1j * p.motor.pole_pairs * ch["velocity"] * d)
+    """The same recording as a drive that logs its voltage in the frame of the sampling instant would: what it logs
+    at t_k acts d later (the closed-loop recorder's voltage is the one held over the loop period ending at its
+    sample, acting half a period earlier: read d + T/2 later), turned forward by p ω d."""
+    ch, t = sig.channels, sig.time
+    at = t + d + 0.5 / p.drive.current_loop_rate
+    v = np.interp(at, t, ch["voltage_d"]) + 1j * np.interp(at, t, ch["voltage_q"])
+    v = v * np.exp(1j * p.motor.pole_pairs * np.interp(t + d, t, ch["velocity"]) * d)
     ch["voltage_d"], ch["voltage_q"] = v.real, v.imag
     return sig
 

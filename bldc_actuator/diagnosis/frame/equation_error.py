@@ -514,10 +514,10 @@ def acting_v_q(S: dict, pole_pairs: int) -> np.ndarray:
     return S["v_q"] * np.cos(phi) - S["v_d"] * np.sin(phi)
 
 
-def voltage_at_sample(ctx: Context) -> np.ndarray:
-    """The q voltage acting on the winding at each sample's instant, where the recording's voltage frame delay d is
-    known (:func:`frame_delay`): the d/q vector logged d EARLIER (linear interpolation within each segment, the edge
-    held), turned back by p ω d. A voltage that acts d after its sampling instant acts in the states (current,
+def voltage_at_sample(ctx: Context, earlier: float = 0.0) -> np.ndarray:
+    """The q voltage acting on the winding at each sample's instant (``earlier`` [s] before it), where the recording's
+    voltage frame delay d is known (:func:`frame_delay`): the d/q vector logged d (+ ``earlier``) EARLIER (linear
+    interpolation within each segment, the edge held), turned back by p ω d. A voltage that acts d after its sampling instant acts in the states (current,
     speed) of that later instant too, not only in the rotor's frame: read against the states of its own sample, the
     back-EMF term misses ``K d dω/dt``, and in free motion ``dω/dt ≈ K i_q / J``, so a resistance ``K² d / J``
     too high appears (motulator's drive, d = 1.5 periods = 150 µs, K 0.0743 N·m/A, J 6e-5 kg·m²: +0.0138 Ω on
@@ -531,7 +531,7 @@ def voltage_at_sample(ctx: Context) -> np.ndarray:
     t = ctx.t
     for a, b in ctx.segments:
         for k in ("v_q", "v_d"):
-            shifted[k][a:b] = np.interp(t[a:b] - d, t[a:b], S[k][a:b])
+            shifted[k][a:b] = np.interp(t[a:b] - d - earlier, t[a:b], S[k][a:b])
     return acting_v_q(shifted, ctx.params.motor.pole_pairs)
 
 
