@@ -9,9 +9,10 @@ there is the model's own error on a 1 kHz log of a 10 kHz drive), with the speed
 speed (its observer's estimate) or from the encoder angle (central difference), and the other channels delayed
 against the logged voltage by 0-1.5 control periods (the drive applies a voltage one period after computing it and
 holds it for one period in stator coordinates: it acts 1.5 periods after its sample, in a frame the rotor has turned
-by p ω d since; the last column reads it so, as the diagnosis's voltage equation does).
+by p ω d since; the last column reads it so, as the diagnosis's voltage equation does), and the diagnosis's own
+equation-error fit of the resistance (:func:`diagnosis_fit`).
 
-    .venv-peers/bin/python benchmarks/thirdparty_resistance_check.py [CACHE_DIR ...]
+    PYTHONPATH=. .venv-peers/bin/python benchmarks/thirdparty_resistance_check.py [CACHE_DIR ...]
     (default: benchmarks/.cache/thirdparty; the recordings of --set thirdparty)
 """
 
@@ -64,6 +65,26 @@ def fit_resistance(d: dict, K: float, L: float, p: int, *, speed: str = "encoder
     return R, se
 
 
+def diagnosis_fit(case_dir: Path) -> tuple[float, float, float]:
+    """The diagnosis's own equation-error estimate: R [Ω], its sd and the voltage frame delay [s] it read from the d
+    axis, from the search's resistance column (with its nuisance columns and the current command as instrument) on
+    the training and held-out files against the nominal file, as ``diagnose`` prepares them."""
+    from bldc_actuator.diagnosis.frame import candidates as cands
+    from bldc_actuator.diagnosis.frame import equation_error as ee
+    from bldc_actuator.diagnosis.io import cleaning, loaders
+    from bldc_actuator.params import load_preset
+
+    params = load_preset(str(case_dir / "params.yaml"))
+    train, held = (cleaning.clean(loaders.load(str(case_dir / f), params=params), params=params)
+                   for f in ("train.csv", "heldout.csv"))
+    ctx = ee.prepare([(train, False), (held, True)], params)
+    cols = {k: ctx.column(k, b) for k, b in ctx.nuisance.items()}
+    cols["r_err"] = ctx.column("r_err", cands.col_r_err)
+    fit = ee.fit_columns(ctx, cols, list(cols), {"electrical": 1.0}, blocks=["electrical"])
+    return (params.motor.phase_resistance + float(fit.beta[-1]), float(np.sqrt(fit.cov[-1, -1])),
+            float(ctx.sig.get("frame_delay", np.nan)))
+
+
 def main(argv: list[str]) -> int:
     dirs = [Path(a) for a in argv] or [REPO / "benchmarks" / ".cache" / "thirdparty"]
     nom = T.nominal_params(T.get_case("tp_null"))
@@ -84,6 +105,9 @@ def main(argv: list[str]) -> int:
                 cells.append(fit_resistance(d, K, L, p, speed=speed, delay_s=1.5e-4, turn=True))
                 print(f"{base.name:22s} {name:14s} {true_R:7.3f} {speed:8s} "
                       + "  ".join(f"{R:.4f} ± {se:.4f}     " for R, se in cells))
+            R, se, fd = diagnosis_fit(base / name)
+            print(f"{base.name:22s} {name:14s} {true_R:7.3f} the diagnosis's equation-error fit (speed from the encoder, "
+                  f"voltage acting {1e6 * fd:.0f} µs after its sample, from the d axis): {R:.4f} ± {se:.4f}")
     return 0
 
 
