@@ -514,6 +514,27 @@ def acting_v_q(S: dict, pole_pairs: int) -> np.ndarray:
     return S["v_q"] * np.cos(phi) - S["v_d"] * np.sin(phi)
 
 
+def voltage_at_sample(ctx: Context, earlier: float = 0.0) -> np.ndarray:
+    """The q voltage acting on the winding at each sample's instant (``earlier`` [s] before it), where the recording's
+    voltage frame delay d is known (:func:`frame_delay`): the d/q vector logged d (+ ``earlier``) EARLIER (linear
+    interpolation within each segment, the edge held), turned back by p ω d. A voltage that acts d after its sampling instant acts in the states (current,
+    speed) of that later instant too, not only in the rotor's frame: read against the states of its own sample, the
+    back-EMF term misses ``K d dω/dt``, and in free motion ``dω/dt ≈ K i_q / J``, so a resistance ``K² d / J``
+    too high appears (motulator's drive, d = 1.5 periods = 150 µs, K 0.0743 N·m/A, J 6e-5 kg·m²: +0.0138 Ω on
+    every case, R 0.182 found as 0.193). Without a known delay: the logged ``v_q``."""
+    S = ctx.sig
+    if "frame_delay" not in S or "v_d" not in S:
+        return S["v_q"]
+    d = float(S["frame_delay"])
+    shifted = {"v_q": np.array(S["v_q"], dtype=float), "v_d": np.array(S["v_d"], dtype=float),
+               "omega": S["omega"], "frame_delay": S["frame_delay"]}
+    t = ctx.t
+    for a, b in ctx.segments:
+        for k in ("v_q", "v_d"):
+            shifted[k][a:b] = np.interp(t[a:b] - d - earlier, t[a:b], S[k][a:b])
+    return acting_v_q(shifted, ctx.params.motor.pole_pairs)
+
+
 def frame_delay(ctx: Context) -> tuple[float, float] | None:
     """(d [s], its sd) or None: how long after its sampling instant the logged d/q voltage acts, in a frame the
     rotor has turned by ``p ω d`` since (a PWM holds the voltage in stator coordinates; a drive that advances its
@@ -849,13 +870,13 @@ def _build_blocks(ctx: Context) -> None:
     if "i_q" in S and "omega" in S and "v_q" in S:
         v_q = S["v_q"]
         fd = frame_delay(ctx)
-        if fd is not None:     # the q voltage that acts on the winding: the logged vector turned back by p ω d
+        if fd is not None:     # the q voltage that acts on the winding at the states' instant (see below)
             S["frame_delay"] = np.array(fd[0])
-            v_q = acting_v_q(S, m.pole_pairs)
+            v_q = voltage_at_sample(ctx)
             ctx.notes.append(f"voltage equation: the logged voltage acts {1e6 * fd[0]:.3g} ± {1e6 * fd[1]:.2g} µs "
                              f"after its sampling instant, in a frame the rotor has turned by p ω d since (from the "
-                             f"d-axis equation; a PWM that holds it in stator coordinates): the q equation uses it "
-                             f"turned back by p ω d")
+                             f"d-axis equation; a PWM that holds it in stator coordinates): the q equation at each "
+                             f"sample uses the voltage logged d earlier, turned back by p ω d")
         y = v_q - S["R"] * S["i_q"] - m.q_inductance * S["di_dt"] - S["K"] * S["omega"] \
             - m.pole_pairs * S["omega"] * m.q_inductance * S["i_d"]
         ok = ctx.valid["voltage_q"] & ctx.valid["current"] & ctx.valid["omega"] & ctx.valid["i_d"]

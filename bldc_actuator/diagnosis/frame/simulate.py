@@ -26,7 +26,7 @@ import scipy.signal as sps
 from ... import effects, frames
 from ...model import BatchActuator
 from ...params import ActuatorParams, controller_motor, keep_controller_of
-from .equation_error import CommandReplay, Context, acting_v_q
+from .equation_error import CommandReplay, Context, voltage_at_sample
 from .transmission import window_load_states
 
 
@@ -172,8 +172,13 @@ def simulate_windows(ctx: Context, param_sets: list[ActuatorParams], starts: lis
     if any(p.drive.dead_time > 0.0 for p in plist):   # the kernel's source of a ripple above the log's cut-off
         as_logged(ctx, sims, S["omega_s"][st], S["omega_s"][idx])
     # the q voltage that acts on the winding (turned back by the recording's voltage frame delay, as the voltage
-    # equation uses it): the drive's simulated voltage is in the rotor frame of the instant it acts
-    meas_v = ctx.dec.lowpass(acting_v_q(S, ctx.params.motor.pole_pairs))[idx] if "v_q" in S else None
+    # equation uses it): the drive's simulated voltage is in the rotor frame of the instant it acts; where that delay
+    # is known the logged voltage is also read at the instant it acts (as the voltage equation reads it), at the
+    # middle of the loop period the simulated sample was held over (its last, ending at the sample)
+    meas_v = None
+    if "v_q" in S:
+        half = 0.5 / ctx.params.drive.current_loop_rate if "frame_delay" in S else 0.0
+        meas_v = ctx.dec.lowpass(voltage_at_sample(ctx, earlier=half))[idx]
     return {**sims, "meas_i": i_meas[idx], "meas_w": S["omega_s"][idx], "meas_th": S["theta"][idx],
             "meas_v": meas_v, "idx": idx}
 
