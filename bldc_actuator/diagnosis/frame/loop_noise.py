@@ -14,8 +14,23 @@ own rate does it stand out of the residual's noise.
 Here: the loop's sensitivity ``S`` as the linearised drive of :mod:`bldc_actuator.kernel` (discrete PI, ``K_p =
 2 pi f_bw L_ctl``, ``K_i = 2 pi f_bw R_ctl``, on the zero-order-hold R-L plant, its computation delay), the sensor's
 noise level from the logged current's top band (there ``|S|^2 sigma^2``, aliased when the log keeps every m-th
-tick), and the expected cross product of a column made from the acceleration with the residual, for
-bias-compensated least squares (``(X'X) beta = X'y - E[X'e]``).
+tick), and the expected cross product of a column with the residual, for bias-compensated least squares
+(``(X'X) beta = X'y - E[X'e]``): the compliance column (:func:`filter_cross`) and the voltage-rate column of the
+current-loop delay (:func:`voltage_rate_cross`: the same noise-driven motion, seen in the voltage equation through
+the back-EMF the drive supplies). The inertia, torque-constant and magnet columns are instrumented instead
+(:func:`.equation_error._acceleration_instrument`): their cross term scales with the TRUE inertia (a joint 1.4 x
+its nominal inertia was over-corrected to 1.44) and :func:`acceleration_cross` only decides where that is needed.
+
+Known limit (the joint controller): the noise reaches the acceleration as ``-(K/J) T S_o n``, ``S_o`` the joint
+(position/speed) loop's sensitivity, which is small below that loop's bandwidth; the cross terms here take
+``S_o = 1``. Over the whole equation band that is close (rigid 10 kHz drive log, 0.25 A per phase: inertia
+corrected to -0.01 %, compliance column at 6-9 Hz to +0.02 +- 0.017 J), but the compliance SEARCH, low-passed to
+half the band, is over-corrected there (9 Hz: 0.44 J predicted for 0.15 J in the data; a compliance from a noisy
+current is searched conservatively). ``S_o`` can be read from the recording (the acceleration the command does not
+explain is the noise alone, ``a_n = -(K/J) T n``, and the command holds ``(1 - S_o) n``: ``S_o = 1 + (K/J)
+Phi(a_n, i_cmd)/Phi(a_n, a_n)``, coherence > 0.9 from 8 Hz up on that log, |S_o| 0.19-1.7); with it the search reads
++0.03 J at 6-9 Hz, but builtin cogging_drive_log_10khz then names an 11.4 Hz compliance without the simulation gate
+(the over-correction had been hiding the cogging left above the resolvable band), so it is not used yet.
 """
 
 from __future__ import annotations
