@@ -301,7 +301,20 @@ def v_dead_time(ctx, loc):
 
 
 def col_delay(ctx):
+    """The voltage-rate column: ``v(t - d) = v - d dv/dt``; where the log's voltage/current pairing is known
+    (:func:`.equation_error.voltage_alignment`) the equation already holds the nominal delay and hold, and the
+    coefficient is the departure from them."""
     return {"electrical": ctx.sig["dv_dt"]}
+
+
+def _delay_cross(ctx):
+    """the loop-fed current-sensor noise this column shares with the voltage equation's residual (:mod:`.loop_noise`)"""
+    from .loop_noise import voltage_rate_cross
+
+    return voltage_rate_cross(ctx)
+
+
+col_delay.cross = _delay_cross
 
 
 def col_deflection(kind, half: float = 0.0, zero: float = 0.0):
@@ -934,11 +947,14 @@ def params_dead_time(coef, cov, keys, variant, ctx):
 def params_delay(coef, cov, keys, variant, ctx):
     """The dv/dt column's coefficient is the delay d [s] (v(t - d) = v - d dv/dt): drive.current_loop_delay,
     which the simulator takes up to one loop period."""
-    d = float(coef[0])
-    period = 1.0 / ctx.params.drive.current_loop_rate
+    delta = float(coef[0])
+    drive = ctx.params.drive
+    # aligned equation: the coefficient is the change of the nominal delay; else the whole lag of the logged voltage
+    d = drive.current_loop_delay + delta if "voltage_alignment" in ctx.sig else delta
+    period = 1.0 / drive.current_loop_rate
     fits = 0.0 <= d <= period
     return {"delay": {"value": d, "sd": _sd(cov, 0), "unit": "s", "field": "drive.current_loop_delay" if fits else None,
-                      "delta": d}}
+                      "delta": delta}}
 
 
 def _flat(field_name):

@@ -218,6 +218,67 @@ def _current_instrument(ctx: Context) -> np.ndarray | None:
     return np.where(ok_c, c, i_meas)
 
 
+#: lag of the acceleration instrument [periods of the equation error's cut-off]: the zero-phase low-pass spreads the
+#: residual's noise over a few periods of its cut-off each side, and the joint controller reacts to that noise (in
+#: the current command) from one tick on; an instrument older than the spread cannot hold the noise the residual
+#: holds (10 kHz drive log, 0.25 A sensor noise, true J = 1.4 x nominal: the command's acceleration unlagged 0.418,
+#: 5 ms 0.405, 20 ms 0.402, 30 ms 0.403)
+ACCELERATION_INSTRUMENT_LAG_PERIODS = 3.0
+#: the acceleration instrument replaces the measured acceleration where the loop-fed current-sensor noise would move
+#: the plain inertia coefficient by more than this share of the nominal inertia (elsewhere least squares is the more
+#: efficient estimator and the lag would only cost precision)
+ACCELERATION_INSTRUMENT_MIN_SHARE = 0.002
+
+
+def _acceleration_instrument(ctx: Context) -> np.ndarray | None:
+    """Instrument [rad/s^2] for every mechanical column built from the measured acceleration (the inertia, the
+    torque-constant and magnet columns through ``P``, the load encoder's inertia column), or None.
+
+    Closed-loop data: the drive regulates the current its sensor measures, so the sensor noise ``n`` is a real torque
+    noise ``-K T n`` (:mod:`.loop_noise`): the mechanical residual is ``n`` and the measured acceleration holds
+    ``-(K/J) T S_o n`` (``S_o`` the joint controller's sensitivity). Least squares reads that shared noise as an
+    inertia too small by ``E[omega' n]/E[omega'^2]`` (10 kHz drive log, 0.25 A per phase: -14 % on a rigid joint
+    of nominal inertia, a false inertia_error). Its size depends on the true inertia and on the joint controller
+    (the nominal-model prediction of :mod:`.loop_noise` over-corrects a heavier joint: +4 % at J = 1.4 x nominal),
+    so it is not subtracted: the column is instrumented instead by the acceleration the recorded current command
+    asks for (nominal model: ``(K i_cmd - (P - J omega'))/J``; the measured acceleration without a command),
+    :data:`ACCELERATION_INSTRUMENT_LAG_PERIODS` cut-off periods EARLIER. The command itself reacts to the noise
+    through the joint controller within the filter's spread (unlagged it is biased the other way: +2.4 % on the
+    same rigid joint); lagged past it, it is independent of the residual's noise whatever path the noise takes,
+    and still follows the motion. Used where :mod:`.loop_noise` predicts a bias above
+    :data:`ACCELERATION_INSTRUMENT_MIN_SHARE` of the inertia."""
+    from .loop_noise import acceleration_cross
+
+    S, p = ctx.sig, ctx.params
+    if ctx.steady or "mechanical" not in ctx.blocks or "omega_dot" not in S:
+        return None
+    J = p.motor.rotor_inertia
+    rows = ctx.train_rows("mechanical")
+    x = ctx.dec.apply(S["omega_dot"] / S["K"])[rows]
+    xx = float(x @ x)
+    if not xx > 0.0:
+        return None
+    share = acceleration_cross(ctx, ctx.fs)(np.ones_like) / xx / J
+    if not abs(share) > ACCELERATION_INSTRUMENT_MIN_SHARE:
+        return None
+    lag = int(round(ACCELERATION_INSTRUMENT_LAG_PERIODS * ctx.fs / ctx.dec.fc))
+    if "i_inst" in S:
+        a = (S["K"] * S["i_inst"] - (S["P"] - J * S["omega_dot"])) / J
+        what = "the acceleration the current command asks for"
+    else:
+        a = S["omega_dot"]
+        what = "the measured acceleration"
+    out = np.empty_like(a)
+    for lo, hi in ctx.segments:
+        k = min(lag, hi - lo)
+        out[lo:lo + k] = a[lo]
+        out[lo + k:hi] = a[lo:hi - k]
+    ctx.notes.append(f"the current sensor's noise fed back by the drive's loop would bias the inertia by "
+                     f"{100 * share:+.1f} % in least squares: acceleration columns are fitted with {what} "
+                     f"{1e3 * lag / ctx.fs:.3g} ms earlier as instrument")
+    return out
+
+
 def _noise_std(x: np.ndarray) -> float:
     """Sample-to-sample noise level (robust): MAD of first differences / sqrt(2)."""
     d = np.diff(x)
@@ -316,8 +377,9 @@ class Context:
     def column(self, key, builder: Callable[["Context"], dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
         """Decimated column ``key`` (equation -> array), built at the raw rate by ``builder`` and cached.
 
-        Built twice when a current instrument exists: with the measured current (the regressor) and with
-        the aligned current command (its instrument, :meth:`instrument`). A builder with a ``cross`` attribute
+        Built twice when an instrument exists: with the measured current and acceleration (the regressor) and
+        with the aligned current command and the lagged acceleration instrument (its instrument,
+        :meth:`instrument`; :func:`_current_instrument`, :func:`_acceleration_instrument`). A builder with a ``cross`` attribute
         (``cross(ctx) -> {eq: float}``) states the expected cross product of its column with the equation's
         residual noise (:meth:`cross`)."""
         if key not in self._col_cache:
@@ -328,11 +390,16 @@ class Context:
             cross = getattr(builder, "cross", None)
             if cross is not None:
                 self._cross_cache[key] = cross(self)
-            if "i_inst" in S:
-                S["i_col"] = S["i_inst"]
+            swap = {"i_col": S["i_inst"]} if "i_inst" in S else {}
+            if "a_inst" in S and cross is None:     # a column stating its own cross term keeps the measured motion
+                swap.update(omega_dot=S["a_inst"], P=S["P_inst"])
+            if swap:
+                kept = {k: S[k] for k in swap if k != "i_col"}
+                S.update(swap)
                 try:
                     z = self._build(builder)
                 finally:
+                    S.update(kept)
                     S["i_col"] = S.get("i_q")
                 if any(not np.array_equal(z[eq], out[eq]) for eq in out):
                     self._inst_cache[key] = z
@@ -498,6 +565,63 @@ def prepare(parts: list[tuple[Any, bool]], params: ActuatorParams, *, fc: float 
     _build_blocks(ctx)
     _nuisance(ctx)
     return ctx
+
+
+#: same-sample correlation of the logged current's and voltage's fast parts (above 0.3 x the log's Nyquist frequency)
+#: at or below which the voltage was computed from the current sample it is logged with (:func:`voltage_alignment`)
+SAME_SAMPLE_CORRELATION = -0.5
+
+
+def voltage_alignment(ctx: Context) -> float | None:
+    """[s] how long after its sampling instant the logged q voltage acts on the sampled current, where the log shows
+    its convention; else None (the voltage taken at its sample, as before).
+
+    A drive computes the voltage of a period from the current sampled at its start and holds it, after its
+    computation delay ``d``, for one loop period ``T``: logged WITH that sample it acts centred ``d + T/2`` after
+    it, while the equation's central differences take the current's derivative AT the sample. A voltage-rate
+    column then reads the hold as a delay (builtin 10 kHz drive logs, ideal sensors: 50.9 us for d = 0, T/2 = 50
+    us; accepted by the equation error as current_loop_delay on all four 10 kHz cases, refused only by the
+    simulation). The log shows the pairing where the current sensor's noise is inside the drive's loop: the sample's
+    noise reappears in the same sample's voltage as ``-K_p n`` (fast parts correlated below
+    :data:`SAME_SAMPLE_CORRELATION`, more than with either neighbour; builtin logs at 100 Hz - 10 kHz: -0.72 to
+    -0.99). A log without that signature (noise-free, or a voltage held from an earlier sample) keeps the
+    voltage at its sample; the delay column then holds the convention too."""
+    S = ctx.sig
+    if ctx.steady or "v_q" not in S or "i_q" not in S:
+        return None
+    cached = ctx.memo(("voltage_alignment",), lambda: _same_sample_correlation(ctx))
+    if cached is None:
+        return None
+    c_prev, c0, c_next = cached
+    if not (c0 <= SAME_SAMPLE_CORRELATION and -c0 > max(abs(c_prev), abs(c_next))):
+        return None
+    d = ctx.params.drive
+    shift = d.current_loop_delay + 0.5 / d.current_loop_rate
+    ctx.notes.append(f"voltage equation: the logged voltage was computed from the current sample logged with it (their "
+                     f"fast parts correlate {c0:.2f} at the same sample): it acts {1e6 * shift:.3g} µs after the "
+                     f"sample (the nominal computation delay + half a loop period)")
+    return shift
+
+
+def _same_sample_correlation(ctx: Context):
+    """(lag -1, 0, +1) correlations of the logged current's and q voltage's parts above 0.3 x the Nyquist frequency
+    (voltage later at +1), over the gap-free segments; None when too short."""
+    S = ctx.sig
+    sos = sps.butter(4, 0.3, "high", output="sos")
+    a, b = [], []
+    for lo, hi in ctx.segments:
+        if hi - lo > 100:
+            a.append(sps.sosfiltfilt(sos, S["i_q"][lo:hi])[10:-10])
+            b.append(sps.sosfiltfilt(sos, S["v_q"][lo:hi])[10:-10])
+    if not a:
+        return None
+    out = []
+    for lag in (-1, 0, 1):
+        x = np.concatenate([s[max(0, -lag):len(s) - max(0, lag)] for s in a])
+        y = np.concatenate([s[max(0, lag):len(s) - max(0, -lag)] for s in b])
+        den = math.sqrt(float(x @ x) * float(y @ y))
+        out.append(float(x @ y) / den if den > 0 else 0.0)
+    return tuple(out)
 
 
 #: largest delay [loop periods] between a logged voltage's sampling instant and the middle of its application
@@ -867,6 +991,10 @@ def _build_blocks(ctx: Context) -> None:
         S["rest"] = rest.astype(float)
         ctx.blocks["mechanical"] = Block("mechanical", ctx.dec.apply(y), ctx.dec.mask(ok), UNITS["mechanical"],
                                          ctx.dec.lowpass(y), ["current", "velocity|position"], excluded)
+        a_inst = _acceleration_instrument(ctx)
+        if a_inst is not None:
+            S["a_inst"] = a_inst
+            S["P_inst"] = P + m.rotor_inertia * (a_inst - S["omega_dot"])
     if "i_q" in S and "omega" in S and "v_q" in S:
         v_q = S["v_q"]
         fd = frame_delay(ctx)
@@ -877,6 +1005,12 @@ def _build_blocks(ctx: Context) -> None:
                              f"after its sampling instant, in a frame the rotor has turned by p ω d since (from the "
                              f"d-axis equation; a PWM that holds it in stator coordinates): the q equation at each "
                              f"sample uses the voltage logged d earlier, turned back by p ω d")
+        # without a frame delay, the log's own pairing of voltage and current sample says when the voltage acts
+        # (a frame delay already places it: one shift, not two)
+        shift = voltage_alignment(ctx) if fd is None else None
+        if shift is not None:   # the voltage that drives the sampled current: the one logged ``shift`` earlier
+            S["voltage_alignment"] = np.array(shift)
+            v_q = v_q - shift * S["dv_dt"]
         y = v_q - S["R"] * S["i_q"] - m.q_inductance * S["di_dt"] - S["K"] * S["omega"] \
             - m.pole_pairs * S["omega"] * m.q_inductance * S["i_d"]
         ok = ctx.valid["voltage_q"] & ctx.valid["current"] & ctx.valid["omega"] & ctx.valid["i_d"]
