@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from ...kernel import DEAD_TIME_SIGNS
 from ..frame import simulate
 
 from ..frame import thermal as thermal_net
@@ -72,6 +73,11 @@ def simulate_findings(ctx, sel, pars, lib, starts: list[int], window_s: float, z
         return {}
     full, _, _ = writeback.updated_params(ctx, sel, pars, lib)
     effects = [a.effect for a in sel.accepted]
+    if "dead_time" in effects and full.drive.dead_time > 0.0:
+        form = dead_time_form(ctx, full, window_s)
+        if form is not None and form["chosen"] != full.drive.dead_time_sign:
+            ctx.dead_time_sign = form["chosen"]
+            full, _, _ = writeback.updated_params(ctx, sel, pars, lib)
     sets = [full]
     for e in effects:
         sub = type(sel)(**{**sel.__dict__, "accepted": [a for a in sel.accepted if a.effect != e]})
@@ -164,6 +170,42 @@ def simulate_findings(ctx, sel, pars, lib, starts: list[int], window_s: float, z
 
 
 REPLAY_CLOSED_LOOP = "closed-loop drive emulated from the recorded commands"
+
+#: a converter form replaces the file's only when its training-window replay error is this much smaller
+DEAD_TIME_FORM_GAIN = 0.9
+
+
+def dead_time_form(ctx, full, window_s: float, max_windows: int = 120) -> dict[str, Any] | None:
+    """The converter form of a found dead time (``drive.dead_time_sign``), identified as the drive's
+    current-controller form is (:mod:`..drive_feedforward`): the TRAINING windows replayed in closed loop under
+    ``full`` with each form, the one that reproduces the recorded q-voltage (the current where no voltage is
+    logged) best, the file's form unless another is better by :data:`DEAD_TIME_FORM_GAIN`. The equation error
+    fits the dead time against the current at each sample (the period-start form); a plant that clamps its
+    current at zero (the kernel's default) and one that samples the current direction once per period (a
+    switching-cycle averaged converter, motulator's) differ where the line currents are within
+    ``(2/3)(h/L) V_dt`` of zero. Sets ``ctx.notes``; returns {"chosen", "errors", "channel", "windows"} or None
+    (no training windows)."""
+    starts = simulate.windows(ctx, window_s, max_windows, "train")
+    if not starts:
+        return None
+    sets = [full.replace(**{"drive.dead_time_sign": f}) for f in DEAD_TIME_SIGNS]
+    res = simulate.replay(ctx, sets, starts, window_s)
+    if not res or not res[0].get("available"):
+        return None
+    ch = "voltage" if res[0]["per_window"].get("voltage") is not None else "current"
+    err = {f: float(np.mean(r["per_window"][ch])) for f, r in zip(DEAD_TIME_SIGNS, res)}
+    cur = {f: float(np.mean(r["per_window"]["current"])) for f, r in zip(DEAD_TIME_SIGNS, res)}
+    chosen = full.drive.dead_time_sign
+    best = min(err, key=err.get)
+    if err[best] < DEAD_TIME_FORM_GAIN * err[chosen]:
+        chosen = best
+    note = (f"dead time's converter form: {chosen} ({len(starts)} training windows replayed in closed "
+                     f"loop: simulated {ch} error " + ", ".join(f"{f} {err[f]:.3g}" for f in DEAD_TIME_SIGNS)
+                     + ("" if ch == "current" else "; current " + ", ".join(f"{f} {cur[f]:.3g} A" for f in cur))
+                     + f"; the file's {full.drive.dead_time_sign} unless another is below {DEAD_TIME_FORM_GAIN:g}x)")
+    if note not in ctx.notes:
+        ctx.notes.append(note)
+    return {"chosen": chosen, "errors": err, "current": cur, "channel": ch, "windows": len(starts)}
 REPLAY_MEASURED_CURRENT = "mechanical equation driven by the measured current"
 
 
