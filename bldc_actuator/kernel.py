@@ -47,7 +47,7 @@ _COEF_SCALARS = (
     "tau_c", "tau_asym", "tau_s", "omega_s", "cog_order", "load0", "load_g", "load_phi", "load_k", "load_k0",
     "has_alpha", "has_beta", "has_stribeck", "has_friction", "has_position_load", "k_sat",
     "fe_h", "fe_e", "sens_off_a", "sens_off_b", "sens_gain_a", "sens_gain_b", "has_sensor_error", "v_dt", "dt_delta",
-    "dt_band",
+    "dt_band", "dt_start",
     "v_lim_mode", "I_fw", "R_ctl", "L_ctl", "K_ctl",
     # the current controller's form (drive.current_controller, see CURRENT_CONTROLLERS): 0 pi, 1 complex_vector
     "cc_form",
@@ -82,6 +82,8 @@ STATE_DTYPE = np.dtype([
 VOLTAGE_LIMIT_MODES = ("proportional", "d_priority", "q_priority", "field_weakening")
 #: ``drive.current_controller`` -> the kernel's ``cc_form`` code
 CURRENT_CONTROLLERS = ("pi", "complex_vector")
+#: ``drive.dead_time_sign`` -> the kernel's ``dt_start`` code (0 clamp, 1 the sign at the interval's start)
+DEAD_TIME_SIGNS = ("clamp", "period_start")
 #: the field-weakening regulator keeps |v| below this fraction of the circle, and runs at this fraction of
 #: the current-loop bandwidth
 FW_VOLTAGE_MARGIN = 0.95
@@ -462,7 +464,11 @@ def advance(c, s, h_ns):
     i0, w0, th0, v = s.i, s.omega, s.theta, s.v
     if c.v_dt != 0.0:   # the inverter's dead time: what reaches the winding, from the currents at the start
         di = (h / c.L) * (v - (c.R_ref + 1j * c.pole_pairs * w0 * c.L) * i0 - 1j * c.K_ref * w0)  # Euler predictor
-        v = v + dead_time_error_dq(i0, di, c.pole_pairs * th0, c.v_dt, c.dt_delta, h / c.L, c.dt_band)
+        if c.dt_start != 0.0:   # period_start: the error of the current at the interval's start, held over it
+            di, h_over_L = 0j, 0.0
+        else:                   # clamp: the interval-end error, zero-current clamping
+            h_over_L = h / c.L
+        v = v + dead_time_error_dq(i0, di, c.pole_pairs * th0, c.v_dt, c.dt_delta, h_over_L, c.dt_band)
     R = _resistance_at(c.R_ref, s.T_w, c.T_ref, c.alpha, True) if c.has_alpha != 0.0 else c.R_ref
     K = c.K_ref * _flux_factor(s.T_h, c.T_ref, c.beta, True) if c.has_beta != 0.0 else c.K_ref  # magnet at T_h
     if c.k_sat != 0.0:   # cross-saturation by the q current at the interval start: torque and back-EMF alike

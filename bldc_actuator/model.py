@@ -179,6 +179,7 @@ class _Coeffs:
         self.v_dt = d("dead_time") * d("pwm_frequency") * self.V_bus
         self.dt_delta = col(lambda p: p.motor.winding == "delta")   # how the leg errors reach the windings
         self.dt_band = d("dead_time_current_band")                  # linear below it (switching ripple), 0 = sign
+        self.dt_start = col(lambda p: kernel.DEAD_TIME_SIGNS.index(p.drive.dead_time_sign))  # 1: sign at start
         self.has_sensor_error = bool(np.any(self.sens_off_a) or np.any(self.sens_off_b)
                                      or np.any(self.sens_gain_a != 1.0) or np.any(self.sens_gain_b != 1.0))
         self.cog_order = e("cogging_order")

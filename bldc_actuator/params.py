@@ -140,6 +140,13 @@ class DriveParams:
                                        "proportional to the current (the switching ripple, or the current loop's "
                                        "sample-to-sample chatter, reverses it within a period): -V_dt clip(i/band, "
                                        "-1, 1); 0 = the ideal sign", 0.0, 100.0)
+    dead_time_sign: str = _p("clamp", "", "when each leg's current direction is taken for its dead-time error: "
+                             "clamp (over each plant interval, a line current its own error would drive through "
+                             "zero is held there: the Filippov average of the sign, zero-current clamping) or "
+                             "period_start (the sign of the line current at the interval's start, held over it, "
+                             "as a switching-cycle averaged converter that samples the current direction once "
+                             "per control period: the current chatters through zero instead of sticking)",
+                             choices=("clamp", "period_start"))
     current_loop_delay: float = _p(0.0, "s", "computation delay: the voltage computed from the sample at a "
                                    "controller tick is applied this long after it (0 .. one loop period)",
                                    0.0, 1e-3)

@@ -937,6 +937,11 @@ def params_dead_time(coef, cov, keys, variant, ctx):
     out = {"dead_time_voltage": {"value": v, "sd": sd_v, "unit": "V", "field": None, "delta": v},
            "dead_time": {"value": t_d, "sd": sd_v / (q * per_leg),
                          "unit": "s", "field": "drive.dead_time" if t_d > 0 else None, "delta": t_d}}
+    if band is None and "i_col" in ctx.sig:
+        # the sign form was fitted smoothed, tanh(i / w) (:func:`col_dead_time`): written as the band of the same
+        # slope at zero, not as the ideal sign (motulator tp_dead_time seeds 2/3: w = 0.36 A; written as the
+        # ideal sign the replay clamped or chattered at every crossing: held-out speed 0.092 vs 0.050 rad/s)
+        band = _sign_width(ctx, ctx.sig["i_col"])
     if band is not None:
         out["dead_time_current_band"] = {"value": float(band), "sd": float("nan"), "unit": "A",
                                          "field": "drive.dead_time_current_band" if t_d > 0 else None,

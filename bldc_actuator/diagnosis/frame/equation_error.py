@@ -352,6 +352,9 @@ class Context:
     drive_updates: dict = field(default_factory=dict)
     #: that identification's result (findings, rejected, not_checkable, simulation), reported by the judge stage
     drive_identified: dict | None = None
+    #: the converter form of a found dead time (``drive.dead_time_sign``), chosen from the training windows by
+    #: :func:`..judge.simulated.dead_time_form`; None: the file's
+    dead_time_sign: str | None = None
     _col_cache: dict = field(default_factory=dict)
     _inst_cache: dict = field(default_factory=dict)
     _cross_cache: dict = field(default_factory=dict)

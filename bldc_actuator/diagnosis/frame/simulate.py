@@ -507,7 +507,8 @@ def window_start(plist: list[ActuatorParams], i_d_meas, i_q_meas, omega, theta, 
             # far below (2/3)(h/L) V_dt = 0.56 A at 1 µs) and returns ~i/1.17 A/V, nearly nothing
             v_dt = d.dead_time * d.pwm_frequency * d.bus_voltage
             delta = 1.0 if m.winding == "delta" else 0.0
-            h_over_L = 1.0 / (d.current_loop_rate * m.q_inductance)
+            # period_start: the kernel takes the sign at the interval's start (its h/L = 0): one pass at 0
+            h_over_L = 1.0 / (d.current_loop_rate * m.q_inductance) if d.dead_time_sign == "clamp" else 0.0
             v_pred = (m.phase_resistance + 1j * m.pole_pairs * w * m.q_inductance) * i + 1j * m.torque_constant_q * w
             band = d.dead_time_current_band
             e = kernel.dead_time_error_dq(i, 0j, th_e, v_dt, delta, 0.0, band)

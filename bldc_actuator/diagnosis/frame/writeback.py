@@ -284,6 +284,8 @@ def updated_params(ctx: Context, sel: SelectionResult, pars: dict[str, dict], li
             flat["effects.cogging_cos"] = tuple(cc)
             flat["effects.cogging_sin"] = tuple(ss)
             continue
+        if a.effect == "dead_time" and ctx.dead_time_sign:
+            flat["drive.dead_time_sign"] = ctx.dead_time_sign     # the converter form the replay identified
         if a.effect == "resistance_temperature":
             flat["motor.resistance_temperature_enabled"] = True
         if a.effect == "magnet_temperature":

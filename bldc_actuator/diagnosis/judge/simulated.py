@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from ...kernel import DEAD_TIME_SIGNS
 from ..frame import simulate
 
 from ..frame import thermal as thermal_net
@@ -72,6 +73,11 @@ def simulate_findings(ctx, sel, pars, lib, starts: list[int], window_s: float, z
         return {}
     full, _, _ = writeback.updated_params(ctx, sel, pars, lib)
     effects = [a.effect for a in sel.accepted]
+    if "dead_time" in effects and full.drive.dead_time > 0.0:
+        form = dead_time_form(ctx, full, window_s)
+        if form is not None and form["chosen"] != full.drive.dead_time_sign:
+            ctx.dead_time_sign = form["chosen"]
+            full, _, _ = writeback.updated_params(ctx, sel, pars, lib)
     sets = [full]
     for e in effects:
         sub = type(sel)(**{**sel.__dict__, "accepted": [a for a in sel.accepted if a.effect != e]})
@@ -164,6 +170,48 @@ def simulate_findings(ctx, sel, pars, lib, starts: list[int], window_s: float, z
 
 
 REPLAY_CLOSED_LOOP = "closed-loop drive emulated from the recorded commands"
+
+#: a converter form replaces the file's only when its training-window replay error is this much smaller
+DEAD_TIME_FORM_GAIN = 0.9
+
+
+def dead_time_form(ctx, full, window_s: float, max_windows: int = 120) -> dict[str, Any] | None:
+    """The converter form of a found dead time (``drive.dead_time_sign``), identified as the drive's
+    current-controller form is (:mod:`..drive_feedforward`): the TRAINING windows replayed in closed loop under
+    ``full`` with each form; the one that reproduces the recorded current better by :data:`DEAD_TIME_FORM_GAIN`,
+    else (the current cannot tell them apart) the one that reproduces the recorded q-voltage better by that
+    much, else the file's form. The equation error fits the dead time against the current at each sample (the
+    period-start form); a plant that clamps its current at zero (the kernel's default) and one that samples the
+    current direction once per period (a switching-cycle averaged converter, motulator's) differ where the line
+    currents are within ``(2/3)(h/L) V_dt`` of zero. Sets ``ctx.notes``; returns {"chosen", "errors" (per
+    channel and form), "decided_by", "windows"} or None (no training windows)."""
+    starts = simulate.windows(ctx, window_s, max_windows, "train")
+    if not starts:
+        return None
+    sets = [full.replace(**{"drive.dead_time_sign": f}) for f in DEAD_TIME_SIGNS]
+    res = simulate.replay(ctx, sets, starts, window_s)
+    if not res or not res[0].get("available"):
+        return None
+    channels = ["current"] + (["voltage"] if res[0]["per_window"].get("voltage") is not None else [])
+    err = {ch: {f: float(np.mean(r["per_window"][ch])) for f, r in zip(DEAD_TIME_SIGNS, res)} for ch in channels}
+    chosen, decided_by = full.drive.dead_time_sign, None
+    for ch in channels:
+        best = min(err[ch], key=err[ch].get)
+        if best != chosen and err[ch][best] < DEAD_TIME_FORM_GAIN * err[ch][chosen]:
+            chosen, decided_by = best, ch
+        if decided_by or max(err[ch].values()) > min(err[ch].values()) / DEAD_TIME_FORM_GAIN:
+            decided_by = decided_by or ch
+            break
+    unit = {"current": "A", "voltage": "V"}
+    note = (f"dead time's converter form: {chosen} (decided by the simulated {decided_by or 'nothing: a tie'}; "
+            f"{len(starts)} training windows replayed in closed loop: "
+            + "; ".join(f"{ch} error " + ", ".join(f"{f} {err[ch][f]:.3g} {unit[ch]}" for f in DEAD_TIME_SIGNS)
+                        for ch in channels)
+            + f"; the file's {full.drive.dead_time_sign} unless another is below {DEAD_TIME_FORM_GAIN:g}x, "
+              f"current first)")
+    if note not in ctx.notes:
+        ctx.notes.append(note)
+    return {"chosen": chosen, "errors": err, "decided_by": decided_by, "windows": len(starts)}
 REPLAY_MEASURED_CURRENT = "mechanical equation driven by the measured current"
 
 
