@@ -14,9 +14,6 @@ write it with the finding."""
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 import textwrap
 
 import numpy as np
@@ -26,6 +23,7 @@ from bldc_actuator import kernel
 from bldc_actuator.diagnosis.pipeline import DiagnoseOptions, diagnose
 from bldc_actuator.params import ActuatorParams
 
+from kernel_paths_helper import run_on_kernel_path
 from test_issue14_judge_helpers import closed_loop_recording
 
 #: a small joint like the third-party set's: 80 µH, 10 kHz current loop, 5 kHz PWM on 24 V (V_dt 0.24 V per leg
@@ -103,13 +101,7 @@ SCENARIO = textwrap.dedent('''
 
 
 def _run(no_numba: bool) -> dict:
-    env = dict(os.environ)
-    env.pop("_ROS_WHEELS_BOOTSTRAP_COMPLETE", None)
-    env["BLDC_ACTUATOR_NO_NUMBA"] = "1" if no_numba else "0"
-    done = subprocess.run([sys.executable, "-c", SCENARIO, json.dumps(BASE)], capture_output=True, text=True,
-                          env=env, timeout=600)
-    assert done.returncode == 0, done.stderr[-3000:]
-    return json.loads(done.stdout)
+    return run_on_kernel_path(SCENARIO, json.dumps(BASE), no_numba=no_numba)
 
 
 @pytest.mark.skipif(not kernel.COMPILED, reason="numba not installed (or disabled): only the Python path exists")

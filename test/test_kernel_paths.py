@@ -7,16 +7,13 @@ files under the fallback, so every physics test runs on both paths.
 
 from __future__ import annotations
 
-import json
-import os
-import subprocess
-import sys
 import textwrap
 
 import numpy as np
 import pytest
 
 from bldc_actuator import kernel
+from kernel_paths_helper import run_on_kernel_path
 
 SCENARIO = textwrap.dedent('''
     import json, math, sys
@@ -49,12 +46,7 @@ SCENARIO = textwrap.dedent('''
 
 
 def _run(no_numba: bool) -> dict:
-    env = dict(os.environ)
-    env.pop("_ROS_WHEELS_BOOTSTRAP_COMPLETE", None)
-    env["BLDC_ACTUATOR_NO_NUMBA"] = "1" if no_numba else "0"
-    done = subprocess.run([sys.executable, "-c", SCENARIO], capture_output=True, text=True, env=env, timeout=600)
-    assert done.returncode == 0, done.stderr[-3000:]
-    return json.loads(done.stdout)
+    return run_on_kernel_path(SCENARIO, no_numba=no_numba)
 
 
 @pytest.mark.skipif(not kernel.COMPILED, reason="numba not installed (or disabled): only the Python path exists")

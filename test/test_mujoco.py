@@ -4,11 +4,7 @@ mechanics, the energy ledger across the two simulators, and the voltage-limited 
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
-import os
-import subprocess
-import sys
 import textwrap
 
 import numpy as np
@@ -19,6 +15,7 @@ from bldc_actuator import kernel
 from bldc_actuator.demo import steady_speed_analytic
 from bldc_actuator.mujoco import CoupledSim
 from bldc_actuator.params import load_preset
+from kernel_paths_helper import run_on_kernel_path
 
 M, L, G = 2.0, 0.3, 9.81      # the pendulum: point mass [kg] at L [m] below the hinge, gravity [m/s²]
 
@@ -151,12 +148,7 @@ PRESCRIBED = textwrap.dedent('''
 
 
 def _prescribed_run(no_numba: bool) -> dict:
-    env = dict(os.environ)
-    env.pop("_ROS_WHEELS_BOOTSTRAP_COMPLETE", None)
-    env["BLDC_ACTUATOR_NO_NUMBA"] = "1" if no_numba else "0"
-    done = subprocess.run([sys.executable, "-c", PRESCRIBED], capture_output=True, text=True, env=env, timeout=600)
-    assert done.returncode == 0, done.stderr[-3000:]
-    return json.loads(done.stdout)
+    return run_on_kernel_path(PRESCRIBED, no_numba=no_numba)
 
 
 @pytest.mark.skipif(not kernel.COMPILED, reason="numba not installed (or disabled): only the Python path exists")
