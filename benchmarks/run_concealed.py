@@ -236,7 +236,8 @@ def main(argv=None) -> int:
     run_dir = args.runs or args.data.parent / (args.data.name + "_runs")
     for k, case in enumerate(cases, start=1):
         log(f"[{k}/{len(cases)}] {case.name}: hidden {', '.join(case.effects) or 'nothing'} ...")
-        report, wall, err = run_case(args.data / case.name, run_dir / case.name, held, args.timeout, args.diagnose_arg)
+        report, wall, err = run_case(args.data / case.name, run_dir / case.name, held, args.timeout,
+                                     [*getattr(S, "DIAGNOSE_ARGS", ()), *args.diagnose_arg])
         with warnings.catch_warnings():     # the case's diagnose run has printed its own parameter warnings
             warnings.simplefilter("ignore", ParameterWarning)
             nominal = load_yaml(args.data / case.name / "params.yaml").to_flat()

@@ -172,6 +172,13 @@ def simulation_spec(case: GEMCase) -> dict:
             "interlocking_time": float(case.interlocking_time), "drive": drive}
 
 
+#: what the user of this drive knows about its log and tells ``diagnose``: the logged voltage is the one the drive
+#: computed from the current sample logged with it, applied one period later (``drive.current_loop_delay``) and held
+#: for a period (:mod:`.gem_sim`); nothing in a noise-free log shows it (no frame turn: the drive advances its angle
+#: by the delay; no sensor noise inside the loop)
+DIAGNOSE_ARGS = ("--voltage-timing", "command")
+
+
 def recording_spec(case: GEMCase) -> dict:
     """Everything ``case``'s recordings depend on besides :mod:`.gem_sim`'s code and the library versions."""
     return {"simulation": simulation_spec(case), "seeds": kit.seeds(case), "train_s": float(case.train_s),

@@ -59,6 +59,11 @@ def register(subparsers) -> None:
     p.add_argument("--no-simulation-gate", dest="simulation_gate", action="store_false",
                    help="accept in equation-error space only (the simulated verdict is still reported per finding)")
     p.add_argument("--cutoff", type=float, metavar="HZ", help="parallel low-pass cut-off (default min(fs/10, 100 Hz))")
+    p.add_argument("--voltage-timing", choices=("auto", "command", "sample"), default="auto",
+                   help="how the logged voltage is timed: 'command' = the voltage the drive computed from the "
+                        "current sample it is logged with (acts drive.current_loop_delay + half a loop period later); "
+                        "'sample' = the voltage acting at its sample; 'auto' (default) = from the log itself (a "
+                        "frame delay on the d axis, or the noise signature of that pairing; else at its sample)")
     p.add_argument("--window", type=float, default=0.1, metavar="S", help="replay window length (default 0.1 s)")
     p.add_argument("--no-plots", action="store_true", help="Markdown report without PNGs")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
@@ -135,7 +140,7 @@ def run(args) -> int:
     options = DiagnoseOptions(effects=effects, holdout=args.holdout, holdout_signals=holdout_signals,
                               cutoff_hz=args.cutoff, window_s=args.window, progress=progress,
                               tolerance=args.tolerance, max_relative_uncertainty=args.max_uncertainty,
-                              simulation_gate=args.simulation_gate)
+                              simulation_gate=args.simulation_gate, voltage_timing=args.voltage_timing)
     try:
         report = diagnose(signals, params, options=options)
     except ValueError as exc:

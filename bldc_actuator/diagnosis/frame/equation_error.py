@@ -355,6 +355,8 @@ class Context:
     #: the converter form of a found dead time (``drive.dead_time_sign``), chosen from the training windows by
     #: :func:`..judge.simulated.dead_time_form`; None: the file's
     dead_time_sign: str | None = None
+    #: how the logged voltage is timed against its samples (:data:`VOLTAGE_TIMINGS`)
+    voltage_timing: str = "auto"
     _col_cache: dict = field(default_factory=dict)
     _inst_cache: dict = field(default_factory=dict)
     _cross_cache: dict = field(default_factory=dict)
@@ -490,7 +492,7 @@ def holdout_mask(t: np.ndarray, segments, fraction: float) -> np.ndarray:
 
 
 def prepare(parts: list[tuple[Any, bool]], params: ActuatorParams, *, fc: float | None = None,
-            holdout: float = 0.3) -> Context:
+            holdout: float = 0.3, voltage_timing: str = "auto") -> Context:
     """Concatenate recordings (``(signals, is_holdout_recording)``), fill masks, derive signals, choose
     the filter. With a single recording, the held-out part is chosen by :func:`holdout_mask`."""
     times, chans, segs, hold, starts = [], {}, [], [], []
@@ -558,8 +560,10 @@ def prepare(parts: list[tuple[Any, bool]], params: ActuatorParams, *, fc: float 
         valid["current"] = valid["current"] & ~clipped
         notes.append(f"current at the drive's limit in {100 * clipped.mean():.1f} % of the samples: left out of "
                      "the model equations (current-proportional terms are not identifiable there)")
+    if voltage_timing not in VOLTAGE_TIMINGS:
+        raise ValueError(f"voltage_timing: expected one of {', '.join(VOLTAGE_TIMINGS)}, got {voltage_timing!r}")
     ctx = Context(params=params, t=t, segments=segments, fs=fs, dec=dec, have=set(raw), raw=raw, valid=valid,
-                  notes=notes, steady=steady, part_starts=tuple(starts))
+                  notes=notes, steady=steady, part_starts=tuple(starts), voltage_timing=voltage_timing)
     if len(parts) > 1 and any(h for _, h in parts):
         ctx.holdout_raw = np.concatenate(hold)
     else:
@@ -598,11 +602,26 @@ def voltage_alignment(ctx: Context) -> float | None:
     c_prev, c0, c_next = cached
     if not (c0 <= SAME_SAMPLE_CORRELATION and -c0 > max(abs(c_prev), abs(c_next))):
         return None
+    return command_voltage_shift(ctx, f"their fast parts correlate {c0:.2f} at the same sample")
+
+
+#: how a recording's voltage is timed against its samples (``DiagnoseOptions.voltage_timing``, ``--voltage-timing``):
+#: ``auto`` = from the log (a frame delay on the d axis, or the noise signature of :func:`voltage_alignment`, else at
+#: its sample); ``command`` = the voltage the drive computed from the sample it is logged with (acting the nominal
+#: computation delay + half a loop period later); ``sample`` = the voltage acting at its sample
+VOLTAGE_TIMINGS = ("auto", "command", "sample")
+
+
+def command_voltage_shift(ctx: Context, why: str) -> float:
+    """[s] how long after its sample a voltage the drive computed from that sample acts: the nominal computation
+    delay (``drive.current_loop_delay``) + half a loop period (the hold); noted with ``why``. A free rotor read at the
+    sample instead carries K² shift / J of apparent resistance (gym-electric-motor's drive, 150 µs, J 9e-5 kg·m²:
+    +0.0092 Ω)."""
     d = ctx.params.drive
     shift = d.current_loop_delay + 0.5 / d.current_loop_rate
-    ctx.notes.append(f"voltage equation: the logged voltage was computed from the current sample logged with it (their "
-                     f"fast parts correlate {c0:.2f} at the same sample): it acts {1e6 * shift:.3g} µs after the "
-                     f"sample (the nominal computation delay + half a loop period)")
+    ctx.notes.append(f"voltage equation: the logged voltage was computed from the current sample logged with it "
+                     f"({why}): it acts {1e6 * shift:.3g} µs after the sample (the nominal computation delay + half a "
+                     f"loop period)")
     return shift
 
 
@@ -1010,7 +1029,11 @@ def _build_blocks(ctx: Context) -> None:
                              f"sample uses the voltage logged d earlier, turned back by p ω d")
         # without a frame delay, the log's own pairing of voltage and current sample says when the voltage acts
         # (a frame delay already places it: one shift, not two)
-        shift = voltage_alignment(ctx) if fd is None else None
+        shift = None
+        if fd is None and ctx.voltage_timing == "command":
+            shift = command_voltage_shift(ctx, "the user says so (--voltage-timing command)")
+        elif fd is None and ctx.voltage_timing == "auto":
+            shift = voltage_alignment(ctx)
         if shift is not None:   # the voltage that drives the sampled current: the one logged ``shift`` earlier
             S["voltage_alignment"] = np.array(shift)
             v_q = v_q - shift * S["dv_dt"]

@@ -126,7 +126,8 @@ def run(signals, params: ActuatorParams, options, say: Say) -> Search | None:
     parts = [(signals, False)]
     if options.holdout_signals is not None:
         parts.append((options.holdout_signals, True))
-    ctx = ee.prepare(parts, params, fc=options.cutoff_hz, holdout=options.holdout)
+    ctx = ee.prepare(parts, params, fc=options.cutoff_hz, holdout=options.holdout,
+                     voltage_timing=options.voltage_timing)
     align = current_alignment(ctx) if ctx.blocks else None
     if align is not None:   # the recording in the model's frame: the torque aligned with the motion it drove
         align_mechanical(ctx, align["shift"])
