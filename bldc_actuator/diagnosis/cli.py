@@ -60,10 +60,11 @@ def register(subparsers) -> None:
                    help="accept in equation-error space only (the simulated verdict is still reported per finding)")
     p.add_argument("--cutoff", type=float, metavar="HZ", help="parallel low-pass cut-off (default min(fs/10, 100 Hz))")
     p.add_argument("--voltage-timing", choices=("auto", "command", "sample"), default="auto",
-                   help="how the logged voltage is timed: 'command' = the voltage the drive computed from the "
+                   help="how the logged voltage is timed where the log shows no frame delay on its d axis (one "
+                        "it shows always places the voltage): 'command' = the voltage the drive computed from the "
                         "current sample it is logged with (acts drive.current_loop_delay + half a loop period later); "
-                        "'sample' = the voltage acting at its sample; 'auto' (default) = from the log itself (a "
-                        "frame delay on the d axis, or the noise signature of that pairing; else at its sample)")
+                        "'sample' = the voltage acting at its sample; 'auto' (default) = 'command' where the log "
+                        "shows that pairing's noise signature, else 'sample'")
     p.add_argument("--window", type=float, default=0.1, metavar="S", help="replay window length (default 0.1 s)")
     p.add_argument("--no-plots", action="store_true", help="Markdown report without PNGs")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")

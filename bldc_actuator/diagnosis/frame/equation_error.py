@@ -605,10 +605,11 @@ def voltage_alignment(ctx: Context) -> float | None:
     return command_voltage_shift(ctx, f"their fast parts correlate {c0:.2f} at the same sample")
 
 
-#: how a recording's voltage is timed against its samples (``DiagnoseOptions.voltage_timing``, ``--voltage-timing``):
-#: ``auto`` = from the log (a frame delay on the d axis, or the noise signature of :func:`voltage_alignment`, else at
-#: its sample); ``command`` = the voltage the drive computed from the sample it is logged with (acting the nominal
-#: computation delay + half a loop period later); ``sample`` = the voltage acting at its sample
+#: how a recording's voltage is timed against its samples where the log shows no frame delay on its d axis (a frame
+#: delay it shows always places the voltage: :func:`voltage_at_sample`) (``DiagnoseOptions.voltage_timing``,
+#: ``--voltage-timing``): ``command`` = the voltage the drive computed from the sample it is logged with (acting the
+#: nominal computation delay + half a loop period later); ``sample`` = the voltage acting at its sample; ``auto`` =
+#: ``command`` where the log shows that pairing's noise signature (:func:`voltage_alignment`), else ``sample``
 VOLTAGE_TIMINGS = ("auto", "command", "sample")
 
 
