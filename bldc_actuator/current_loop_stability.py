@@ -31,6 +31,7 @@ covered here.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -91,10 +92,13 @@ def spectral_radius(theta, a: float, r: float, l_ratio: float = 1.0, feedforward
     return np.max(np.abs(np.linalg.eigvals(m)), axis=-1)
 
 
+@functools.lru_cache(maxsize=256)
 def angle_limit(a: float, r: float, l_ratio: float = 1.0, feedforward: bool = False,
                 delay_fraction: float = 1.0) -> float:
     """The smallest electrical angle per period ``p |omega| T_c`` [rad] where the loop stops being stable (0 when it
-    is not stable at standstill; ``inf`` when it stays stable up to :data:`ANGLE_MAX`)."""
+    is not stable at standstill; ``inf`` when it stays stable up to :data:`ANGLE_MAX`). Cached: a parameter set is
+    checked where it is loaded, where an actuator is built from it and where the diagnosis replays it (~40 ms each
+    uncached)."""
     args = (a, r, l_ratio, feedforward, delay_fraction)
     th = np.linspace(0.0, ANGLE_MAX, _GRID + 1)
     rho = spectral_radius(th, *args)
