@@ -171,6 +171,9 @@ def simulate_findings(ctx, sel, pars, lib, starts: list[int], window_s: float, z
 
 REPLAY_CLOSED_LOOP = "closed-loop drive emulated from the recorded commands"
 
+REPLAY_MEASURED_CURRENT = "mechanical equation driven by the measured current"
+
+
 #: a converter form replaces the file's only when its training-window replay error is this much smaller
 DEAD_TIME_FORM_GAIN = 0.9
 
@@ -195,12 +198,10 @@ def dead_time_form(ctx, full, window_s: float, max_windows: int = 120) -> dict[s
     channels = ["current"] + (["voltage"] if res[0]["per_window"].get("voltage") is not None else [])
     err = {ch: {f: float(np.mean(r["per_window"][ch])) for f, r in zip(DEAD_TIME_SIGNS, res)} for ch in channels}
     chosen, decided_by = full.drive.dead_time_sign, None
-    for ch in channels:
+    for ch in channels:     # the first channel whose best form beats the other by the margin decides
         best = min(err[ch], key=err[ch].get)
-        if best != chosen and err[ch][best] < DEAD_TIME_FORM_GAIN * err[ch][chosen]:
+        if err[ch][best] < DEAD_TIME_FORM_GAIN * max(err[ch].values()):
             chosen, decided_by = best, ch
-        if decided_by or max(err[ch].values()) > min(err[ch].values()) / DEAD_TIME_FORM_GAIN:
-            decided_by = decided_by or ch
             break
     unit = {"current": "A", "voltage": "V"}
     note = (f"dead time's converter form: {chosen} (decided by the simulated {decided_by or 'nothing: a tie'}; "
@@ -212,7 +213,7 @@ def dead_time_form(ctx, full, window_s: float, max_windows: int = 120) -> dict[s
     if note not in ctx.notes:
         ctx.notes.append(note)
     return {"chosen": chosen, "errors": err, "decided_by": decided_by, "windows": len(starts)}
-REPLAY_MEASURED_CURRENT = "mechanical equation driven by the measured current"
+
 
 
 def _channel(lib, effect: str) -> str:
