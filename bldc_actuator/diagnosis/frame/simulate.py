@@ -61,6 +61,16 @@ def windows(ctx: Context, length: float, max_windows: int, which: str) -> list[i
     return thin(starts, max_windows)
 
 
+def mean_se(d) -> tuple[float, float]:
+    """Mean of per-window differences ``d`` and its standard error over the windows (non-finite windows left
+    out); NaN for both with fewer than 3."""
+    d = np.asarray(d, float)
+    d = d[np.isfinite(d)]
+    if len(d) < 3:
+        return float("nan"), float("nan")
+    return float(np.mean(d)), float(np.std(d, ddof=1) / math.sqrt(len(d)))
+
+
 def thin(starts: list[int], max_windows: int) -> list[int]:
     """``starts`` evenly thinned to at most ``max_windows`` (first and last kept)."""
     if len(starts) <= max_windows:
@@ -406,9 +416,8 @@ def command_replay(ctx: Context, params: ActuatorParams, starts: list[int], leng
         scale = float(np.mean(errs["hold"][ch]))
         if scale > 0 and math.isfinite(scale):
             d += (errs["interpolate"][ch] - errs["hold"][ch]) / scale
-    ok = np.isfinite(d)
-    score = float(np.mean(d[ok])) if ok.sum() >= 3 else float("nan")
-    floor = float(z * np.std(d[ok], ddof=1) / math.sqrt(ok.sum())) if ok.sum() >= 3 else float("nan")
+    score, se = mean_se(d)
+    floor = z * se
     means = {way: {ch: float(np.mean(v)) for ch, v in e.items()} for way, e in errs.items()}
     if math.isfinite(score) and score != 0.0:
         hold = score > 0

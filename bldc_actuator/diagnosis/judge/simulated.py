@@ -56,12 +56,8 @@ def _speed_scale(ctx, starts: list[int], window_s: float) -> float:
 
 
 def _paired(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
-    """Mean of a - b and its standard error over windows."""
-    d = np.asarray(a, float) - np.asarray(b, float)
-    d = d[np.isfinite(d)]
-    if len(d) < 3:
-        return float("nan"), float("nan")
-    return float(np.mean(d)), float(np.std(d, ddof=1) / math.sqrt(len(d)))
+    """Mean of a - b and its standard error over windows (:func:`.simulate.mean_se`)."""
+    return simulate.mean_se(np.asarray(a, float) - np.asarray(b, float))
 
 
 def simulate_findings(ctx, sel, pars, lib, starts: list[int], window_s: float, z: float = 2.0,
@@ -294,12 +290,8 @@ def _verdict_current_driven(without: np.ndarray, with_: np.ndarray, drift_withou
     a, b = np.square(np.asarray(without, float)), np.square(np.asarray(with_, float))
     ok = np.isfinite(a) & np.isfinite(b)
     a, b = a[ok], b[ok]
-
-    def paired(d):
-        return (float(np.mean(d)), float(np.std(d, ddof=1) / math.sqrt(len(d)))) if len(d) >= 3 else (
-            float("nan"), float("nan"))
-    imp, se = paired((a - drift_without ** 2) - (b - drift_with ** 2))
-    imp_raw, se_raw = paired(a - b)
+    imp, se = simulate.mean_se((a - drift_without ** 2) - (b - drift_with ** 2))
+    imp_raw, se_raw = simulate.mean_se(a - b)
     # the drift is an estimate (sigma from the current above the low-pass, taken as white): over-estimated it
     # would favour a larger K or a smaller J as surely as the raw errors disfavour them (a 4 s null recording: a
     # spurious J x0.49, raw 0.27 -> 0.55 rad/s, "better" by a drift estimated at 0.33 -> 0.68). So a verdict
