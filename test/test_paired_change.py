@@ -54,3 +54,27 @@ def test_mean_square_change_is_the_difference_of_the_squared_rms():
     p = paired_change(before, after)
     assert np.isclose(p["velocity"]["mean_square_change"], after["velocity_rms"] ** 2 - before["velocity_rms"] ** 2)
     assert p["velocity"]["windows"] == 30
+
+
+
+def test_a_non_finite_window_is_left_out_and_fewer_than_three_windows_give_no_paired_test():
+    """The paired change is :func:`frame.simulate.mean_se`'s (the judge's): a window whose simulated error is not
+    finite is left out (before, one NaN window made the channel's change NaN, never significant however much
+    worse the other windows got), and with fewer than 3 finite windows the channel has no paired test (the 1 % rule
+    alone decides, as for a report without one)."""
+    rng = np.random.default_rng(2)
+    n = 12
+    v0 = 0.1 * (1 + 0.1 * rng.standard_normal(n))
+    before = _replay({"velocity": v0, "current": np.full(n, 0.01)})
+    v1 = 3.0 * v0
+    v1[4] = np.nan                                        # one diverged window
+    p = paired_change(before, _replay({"velocity": v1, "current": np.full(n, 0.01)}))
+    ok = np.isfinite(v1)
+    assert p["velocity"]["windows"] == n - 1
+    assert np.isclose(p["velocity"]["mean_square_change"], np.mean(v1[ok] ** 2 - v0[ok] ** 2))
+    assert p["velocity"]["significant"]                   # 3x worse in every finite window
+    assert p["current"] == {"mean_square_change": 0.0, "standard_error": 0.0, "windows": n, "significant": False}
+    two = paired_change(_replay({"velocity": v0[:2]}), _replay({"velocity": v1[:2]}))
+    assert "velocity" not in two
+    three = paired_change(_replay({"velocity": v0[:3]}), _replay({"velocity": v1[:3]}))
+    assert three["velocity"]["windows"] == 3

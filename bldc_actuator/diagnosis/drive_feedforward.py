@@ -193,14 +193,13 @@ def identify(ctx, params: ActuatorParams, starts_train: list[int], starts_holdou
     sim["candidate"] = best[1]
     sim["candidate_form"] = list(best)
     e_ho = simulate.window_errors(ctx, [sets[0], sets[best_k]], ho, window_s)
-    d_i = e_ho[0]["current"] - e_ho[1]["current"]
-    imp, se = float(np.mean(d_i)), float(np.std(d_i, ddof=1) / math.sqrt(len(d_i)))
+    imp, se = simulate.mean_se(e_ho[0]["current"] - e_ho[1]["current"])
     before, after = float(np.mean(e_ho[0]["current"])), float(np.mean(e_ho[1]["current"]))
     w_before, w_after = float(np.mean(e_ho[0]["velocity"])), float(np.mean(e_ho[1]["velocity"]))
     confirmed = imp > z * se and imp > tolerance * before
     if best[0] != nominal[0]:                 # another law: its held-out speed must not be worse either
-        d_w = e_ho[0]["velocity"] - e_ho[1]["velocity"]
-        confirmed = confirmed and float(np.mean(d_w)) > -z * float(np.std(d_w, ddof=1) / math.sqrt(len(d_w)))
+        imp_w, se_w = simulate.mean_se(e_ho[0]["velocity"] - e_ho[1]["velocity"])
+        confirmed = confirmed and imp_w > -z * se_w
     verdict = "confirmed" if confirmed else "not confirmed"
     sim.update({"channel": "current", "without": before, "with": after, "improvement": imp, "noise_floor": z * se,
                 "other_channel": "velocity", "other_channel_change": w_before - w_after,

@@ -18,7 +18,6 @@ One entry point, plain data out: :func:`identify`.
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
@@ -133,10 +132,8 @@ def identify(ctx, params: ActuatorParams, window_s: float, *, wanted: bool = Tru
                                           f"(relative training error {', '.join(f'{m} {v:.3f}' for m, v in scores.items())})"})
         return out
     e_ho = simulate.window_errors(ctx, [variants[nominal], variants[best]], ho, window_s, current_d=True)
-    d_i = e_ho[0]["current"] - e_ho[1]["current"]
-    d_w = e_ho[0]["velocity"] - e_ho[1]["velocity"]
-    imp, se = float(np.mean(d_i)), float(np.std(d_i, ddof=1) / math.sqrt(len(d_i)))
-    imp_w, se_w = float(np.mean(d_w)), float(np.std(d_w, ddof=1) / math.sqrt(len(d_w)))
+    imp, se = simulate.mean_se(e_ho[0]["current"] - e_ho[1]["current"])
+    imp_w, se_w = simulate.mean_se(e_ho[0]["velocity"] - e_ho[1]["velocity"])
     before, after = float(np.mean(e_ho[0]["current"])), float(np.mean(e_ho[1]["current"]))
     w_before, w_after = float(np.mean(e_ho[0]["velocity"])), float(np.mean(e_ho[1]["velocity"]))
     worse_w = imp_w < -z * se_w and -imp_w > tolerance * w_before

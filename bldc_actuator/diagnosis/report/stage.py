@@ -46,19 +46,22 @@ def _strip(r):
 
 def paired_change(before: dict, after: dict) -> dict[str, dict]:
     """Per channel, the held-out windows' paired change of the squared simulation error, after - before: its mean
-    (= after_rms^2 - before_rms^2), standard error over the windows and whether the change is beyond 2 standard
-    errors. A change of RMS within that band is the recording's noise, not the model (an error already at the noise
-    floor moves by a few per cent with any parameter change)."""
+    (= after_rms^2 - before_rms^2), standard error over the windows (:func:`..frame.simulate.mean_se`: finite
+    windows, at least 3; a channel with fewer is left out, judged by the 1 % rule alone) and whether the change is
+    beyond 2 standard errors. A change of RMS within that band is the recording's noise, not the model (an error
+    already at the noise floor moves by a few per cent with any parameter change)."""
     out: dict[str, dict] = {}
     if not (before.get("available") and after.get("available")):
         return out
     for ch in ("current", "velocity", "position", "voltage"):
         b, a = (before.get("per_window") or {}).get(ch), (after.get("per_window") or {}).get(ch)
-        if b is None or a is None or len(b) < 2:
+        if b is None or a is None:
             continue
         d = np.asarray(a, float) ** 2 - np.asarray(b, float) ** 2
-        mean, se = float(np.mean(d)), float(np.std(d, ddof=1) / np.sqrt(len(d)))
-        out[ch] = {"mean_square_change": mean, "standard_error": se, "windows": int(len(d)),
+        mean, se = simulate.mean_se(d)
+        if mean != mean:        # fewer than 3 finite windows: no paired test
+            continue
+        out[ch] = {"mean_square_change": mean, "standard_error": se, "windows": int(np.isfinite(d).sum()),
                    "significant": bool(abs(mean) > 2.0 * se)}
     return out
 
