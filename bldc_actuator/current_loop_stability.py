@@ -180,6 +180,15 @@ class SpeedLimit:
         return float(brentq(lambda b: self._angle_limit(self.rate, b) - th_need, lo, self.bandwidth,
                             xtol=1e-3 * self.bandwidth))
 
+    def unstable_above(self, law: str = "drive.current_controller: complex_vector") -> str:
+        """The one sentence every user of this limit prints (the parameter warning, the diagnosis's drive-form and
+        voltage-limit-mode checks): ``law`` (how the caller names the controller) is unstable above the rotor
+        speed limit, with the angle per period and the fields it comes from."""
+        return (f"{law} is unstable above {self.speed_limit:.4g} rad/s ({self.speed_limit_rpm:.0f} rpm) in this "
+                f"simulator (p*omega*T_c = {self.angle_limit:.3g} rad with drive.current_loop_bandwidth "
+                f"{self.bandwidth:g} Hz at drive.current_loop_rate {self.rate:g} Hz and drive.current_loop_delay "
+                f"{self.delay_fraction:.3g} period(s))")
+
     def message(self, speed: float | None = None, what: str | None = None) -> str:
         """What a user must read when ``speed`` [rad/s] (default: the motor's no-load speed, ``what`` says
         where it comes from) outruns the loop: the fields, the limit in rad/s and rpm, what to change."""
@@ -187,12 +196,9 @@ class SpeedLimit:
         if speed is None:
             speed = self.max_speed
             what = what or f"the motor's no-load speed on drive.bus_voltage {self.bus_voltage:g} V is"
-        out = (f"drive.current_controller: complex_vector is unstable above p*omega*T_c = {self.angle_limit:.3g} rad "
-               f"(drive.current_loop_bandwidth {self.bandwidth:g} Hz at drive.current_loop_rate {self.rate:g} Hz, "
-               f"drive.current_loop_delay {self.delay_fraction:.3g} period(s)): rotor speeds above "
-               f"{self.speed_limit:.4g} rad/s ({rpm(self.speed_limit):.0f} rpm"
-               + (f"; output {self.speed_limit / self.gear_ratio:.4g} rad/s" if self.gear_ratio != 1.0 else "")
-               + f") make the current loop diverge, and {what or 'the speed is'} {speed:.4g} rad/s "
+        out = (self.unstable_above()
+               + (f"; at the output {self.speed_limit / self.gear_ratio:.4g} rad/s" if self.gear_ratio != 1.0 else "")
+               + f": the current loop diverges above it, and {what or 'the speed is'} {speed:.4g} rad/s "
                f"({rpm(speed):.0f} rpm). Keep the speed below the limit, or set drive.current_loop_rate >= "
                f"{self.rate_needed(speed):.0f} Hz" + (f" (drive.current_loop_delay scaled with it: "
                                                       f"{self.delay_fraction:.3g} period(s))" if self.delay_fraction

@@ -249,6 +249,7 @@ def test_a_form_whose_loop_diverges_at_the_recordings_speeds_is_neither_replayed
     r = drive_feedforward.identify(ctx, nominal, tr, ho, 0.1)
     label = drive_feedforward._label(cv)
     assert label in r["unstable_forms"] and f"{limit.speed_limit:.4g} rad/s" in r["unstable_forms"][label]
+    assert limit.unstable_above(label) in r["unstable_forms"][label]     # the one sentence (current_loop_stability)
     assert label not in r["simulation"]["training_current_error"]
     (f,) = r["findings"]                       # the recording's drive is still named
     assert f["updated_fields"] == drive_feedforward.fields(("pi", False))

@@ -129,3 +129,4 @@ def test_no_mode_is_judged_where_the_models_complex_vector_loop_diverges():
     assert not r["findings"]
     (nc,) = r["not_checkable"]
     assert "complex_vector is unstable" in nc["reason"] and f"{lim.speed_limit:.4g} rad/s" in nc["reason"]
+    assert lim.unstable_above("the model's drive.current_controller complex_vector") in nc["reason"]

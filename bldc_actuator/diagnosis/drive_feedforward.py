@@ -101,10 +101,7 @@ def unstable_on_recording(params: ActuatorParams, form: Form, speed: float) -> s
     lim = current_loop_limit(params.replace(**fields(form)))
     if lim is None or lim.stable_at([speed]):
         return None
-    return (f"{_label(form)} is unstable above {lim.speed_limit:.4g} rad/s in this simulator (p*omega*T_c = "
-            f"{lim.angle_limit:.3g} rad with drive.current_loop_bandwidth {lim.bandwidth:g} Hz at "
-            f"drive.current_loop_rate {lim.rate:g} Hz and {lim.delay_fraction:.3g} period(s) of delay) and the "
-            f"recording reaches {speed:.4g} rad/s")
+    return f"{lim.unstable_above(_label(form))} and the recording reaches {speed:.4g} rad/s"
 
 
 def identify(ctx, params: ActuatorParams, starts_train: list[int], starts_holdout: list[int], window_s: float, *,

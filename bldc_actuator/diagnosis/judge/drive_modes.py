@@ -67,9 +67,8 @@ def _stable_windows(ctx, starts: list[int], window_s: float, params: ActuatorPar
     keep = [s for s in starts if lim.stable_at(w[s:s + L + 1])]
     if len(keep) == len(starts):
         return starts, ""
-    return keep, (f"{len(starts) - len(keep)} window(s) above {lim.speed_limit:.4g} rad/s left out: the model's "
-                  f"drive.current_controller complex_vector is unstable there (p*omega*T_c > {lim.angle_limit:.3g} rad "
-                  f"with drive.current_loop_bandwidth {lim.bandwidth:g} Hz at drive.current_loop_rate {lim.rate:g} Hz)")
+    return keep, (f"{len(starts) - len(keep)} window(s) left out: "
+                  + lim.unstable_above("the model's drive.current_controller complex_vector"))
 
 
 def _variants(params: ActuatorParams) -> dict[str, ActuatorParams]:
