@@ -74,11 +74,13 @@ def simulate_profile(params: ActuatorParams | str | Path, profile: profiles.Prof
     parameter file for :func:`~bldc_actuator.params.load_preset`); every signal sampled at ``rate`` [Hz]
     whatever the profile's own rows (``None``: at the profile's samples). What ``bldc-actuator simulate``
     computes."""
-    if not isinstance(params, ActuatorParams):
+    read = not isinstance(params, ActuatorParams)
+    if read:
         params = load_preset(params)
     if rate is not None and not (rate > 0 and np.isfinite(rate)):
         raise ValueError(f"rate: expected > 0 Hz, got {rate!r}")
-    return Actuator(params).run(profile, record_every=None if rate is None else 1.0 / rate)
+    # a file's warnings (the current loop's among them) were printed where it was read, with its name
+    return Actuator(params, warn=not read).run(profile, record_every=None if rate is None else 1.0 / rate)
 
 
 def load_params(args) -> ActuatorParams:
@@ -168,7 +170,9 @@ def run(args) -> int:
     except (ParameterError, ValueError) as exc:
         print(f"bldc-actuator simulate: {exc}", file=sys.stderr)
         return 2
-    act = Actuator(params)
+    # the parameter file's warnings (the current loop's among them) were printed where it was read, with its name
+    act = Actuator(params, warn=not (args.params or args.preset))
+    e0 = act.energy
     # outputs at --rate whatever the profile: a CSV of a few command rows still gives a full trace
     result = act.run(prof, record_every=1.0 / args.rate)
     csv_path = args.out.with_suffix(".csv")
@@ -182,5 +186,5 @@ def run(args) -> int:
     e = act.energy
     print(f"energy: in {e.electrical_in:.6g} J = Joule {e.joule:.6g} + mechanical "
           f"{e.viscous + e.friction + e.load:.6g} + stored {e.kinetic + e.magnetic:.6g} "
-          f"(residual {e.residual(Actuator(params).energy):.2e} J)")
+          f"(residual {e.residual(e0):.2e} J)")
     return 0
