@@ -227,7 +227,7 @@ class _Coeffs:
         return cs
 
 
-def _warn_current_loop(params: Sequence[ActuatorParams]) -> None:
+def warn_current_loop(params: Sequence[ActuatorParams]) -> None:
     """A ``ParameterWarning`` when the motor can outrun the complex-vector current loop
     (:func:`~bldc_actuator.params.current_loop_warning`): what a user of an actuator (``simulate``, the node's
     plant, the MuJoCo coupling, the Python API) must notice before a run at high speed diverges. Once per
@@ -521,11 +521,11 @@ class Actuator(_Base):
     def __init__(self, params: ActuatorParams | None = None, state: ActuatorState | None = None, *,
                  warn: bool = True):
         """``warn``: a ``ParameterWarning`` when the motor can outrun a complex-vector current loop
-        (:func:`_warn_current_loop`); False where the caller has printed it already (the parameter file's reader,
+        (:func:`warn_current_loop`); False where the caller has printed it already (the parameter file's reader,
         :func:`~bldc_actuator.params.load_yaml`, says it with the file's name)."""
         self.params = params if params is not None else ActuatorParams()
         if warn:
-            _warn_current_loop([self.params])
+            warn_current_loop([self.params])
         th = self.params.thermal
         self._init_kernel([self.params], th.initial_winding_temperature, th.initial_housing_temperature)
         self._v_mode = False
@@ -572,7 +572,7 @@ class Actuator(_Base):
         that turns compliant starts with its load where the rigid one held it (:meth:`_seat_load`)."""
         was = bool(self._c.compliant)
         if params.drive != self.params.drive or params.motor != self.params.motor:
-            _warn_current_loop([params])
+            warn_current_loop([params])
         self.params = params
         self._new_coeffs([params])
         if not was:
@@ -725,7 +725,7 @@ class BatchActuator(_Base):
         if not self.params:
             raise ValueError("BatchActuator needs at least one parameter set")
         if warn:
-            _warn_current_loop(self.params)
+            warn_current_loop(self.params)
         T_w0 = np.array([p.thermal.initial_winding_temperature for p in self.params])
         T_h0 = np.array([p.thermal.initial_housing_temperature for p in self.params])
         self._init_kernel(self.params, T_w0, T_h0)
@@ -768,7 +768,7 @@ class BatchActuator(_Base):
         if len(params) != len(self):
             raise ValueError(f"params: expected {len(self)} parameter sets, got {len(params)}")
         was = np.asarray(self._c.has_compliance, dtype=bool)
-        _warn_current_loop([p for p, q in zip(params, self.params) if p.drive != q.drive or p.motor != q.motor])
+        warn_current_loop([p for p, q in zip(params, self.params) if p.drive != q.drive or p.motor != q.motor])
         self.params = params
         self._new_coeffs(params)
         self._winding = np.array([p.motor.winding for p in params])

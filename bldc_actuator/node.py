@@ -329,14 +329,14 @@ class ActuatorNode(Node):
     def _make_plant(self, joint_params, period_ns: int):
         """The actuators alone (:class:`ActuatorPlant`) or, with ``mujoco.model``, under the robot's bodies
         (:class:`bldc_actuator.mujoco.CoupledSim`: MuJoCo integrates the bodies, the joint states are theirs)."""
-        if not self.mujoco_model:
-            return ActuatorPlant(joint_params)
+        if not self.mujoco_model:   # the current loop's warning: logged per joint by __init__, not again here
+            return ActuatorPlant(joint_params, warn=False)
         try:
             from .mujoco.coupling import CoupledSim
         except ModuleNotFoundError as exc:
             raise ParameterError(NP.MUJOCO_MODEL, f"needs MuJoCo (pip install .[mujoco]): {exc}") from None
         try:
-            plant = CoupledSim(self.mujoco_model, joint_params)
+            plant = CoupledSim(self.mujoco_model, joint_params, warn=False)
         except ValueError as exc:
             raise ParameterError(NP.MUJOCO_MODEL, str(exc)) from None
         h_ns = int(round(plant.timestep * 1e9))

@@ -92,11 +92,13 @@ class ActuatorPlant:
     2.0
     """
 
-    def __init__(self, params: dict[str, ActuatorParams]):
+    def __init__(self, params: dict[str, ActuatorParams], *, warn: bool = True):
+        """``warn``: each joint's Actuator warns where its motor can outrun a complex-vector current loop; False
+        where the caller says it (the node logs it per joint)."""
         if not params:
             raise ValueError("ActuatorPlant needs at least one joint")
         self._names = list(params)
-        self._acts = {name: Actuator(p) for name, p in params.items()}
+        self._acts = {name: Actuator(p, warn=warn) for name, p in params.items()}
         self._list = list(self._acts.values())
         self._steps = [a.step_ns for a in self._list]
         self._outs = [a.outputs for a in self._list]

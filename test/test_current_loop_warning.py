@@ -8,6 +8,7 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
+import pytest
 
 from bldc_actuator import params as P
 from bldc_actuator.cli import main
@@ -80,3 +81,26 @@ def test_a_batch_warns_as_the_actuator_does_once_per_distinct_warning():
     assert ws == []
     b.step(1e-3)
     assert np.all(np.isfinite(b.field("omega")))
+
+
+def test_the_node_plants_warn_like_the_actuator_or_leave_it_to_the_node():
+    """The node logs each joint's warning itself: its plants are built with ``warn=False``; built directly they
+    warn once per distinct set, the MuJoCo coupling only for joints given as parameters (a preset was said where
+    it was read)."""
+    from bldc_actuator.plant import ActuatorPlant
+
+    ws, _ = _loop_warnings(lambda: ActuatorPlant({"hip": JOINT, "knee": STABLE}))
+    assert [str(w.message) for w in ws] == [P.current_loop_warning(JOINT)]
+    ws, _ = _loop_warnings(lambda: ActuatorPlant({"hip": JOINT, "knee": JOINT}, warn=False))
+    assert ws == []
+    pytest.importorskip("mujoco")
+    from pathlib import Path
+
+    from bldc_actuator.mujoco.coupling import CoupledSim
+
+    leg = Path(__file__).resolve().parents[1] / "config" / "two_link_leg.xml"
+    joint = JOINT.replace(**{"load.gravity_torque": 0.0, "load.spring_stiffness": 0.0})
+    ws, _ = _loop_warnings(lambda: CoupledSim(leg, {"hip": joint, "knee": joint}))
+    assert len(ws) == 1 and ws[0].filename == __file__
+    ws, _ = _loop_warnings(lambda: CoupledSim(leg, {"hip": joint, "knee": joint}, warn=False))
+    assert ws == []

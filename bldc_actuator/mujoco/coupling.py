@@ -32,7 +32,7 @@ import mujoco
 import numpy as np
 
 from .. import effects
-from ..model import BatchActuator
+from ..model import BatchActuator, warn_current_loop
 from ..params import ActuatorParams, load_preset
 
 log = logging.getLogger(__name__)
@@ -124,7 +124,11 @@ class CoupledSim:
     :meth:`set_torque_command`, :meth:`set_load_torque`, :meth:`step_ns`, :attr:`t_ns`, :meth:`outputs`.
     """
 
-    def __init__(self, mjcf, actuators: Mapping[str, Any], *, timestep: float | None = None):
+    def __init__(self, mjcf, actuators: Mapping[str, Any], *, timestep: float | None = None, warn: bool = True):
+        """``warn``: the ``ParameterWarning`` of a complex-vector current loop the motor can outrun
+        (:func:`..model.warn_current_loop`) for the joints given as :class:`ActuatorParams` (a preset or file was
+        warned about where it was read, with its name); False where the caller says it (the node logs it per
+        joint)."""
         if not actuators:
             raise ValueError("actuators: expected at least one joint name -> parameters")
         self.model = load_model(mjcf)
@@ -164,7 +168,10 @@ class CoupledSim:
                             "(rotor inertia, drag and friction through the gear)", self._joints[k], had)
         self._apply_params()
         self._load = np.zeros(len(self._joints))
-        self.actuators = BatchActuator(self._params)
+        if warn:
+            warn_current_loop([p for j, p in zip(self._joints, self._params)
+                               if isinstance(actuators[j], ActuatorParams)])
+        self.actuators = BatchActuator(self._params, warn=False)
         self._cmd_q = np.zeros(len(self._joints))
         self._cmd_dirty = False
         mujoco.mj_forward(m, self.data)
