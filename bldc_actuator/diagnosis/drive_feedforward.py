@@ -40,6 +40,7 @@ import numpy as np
 
 from ..params import ActuatorParams, current_loop_limit
 from .frame import simulate
+from .judge.drive_modes import drive_replay_unavailable
 
 EFFECT = "drive_current_controller"
 #: the name the finding had before (reports written then say it; :data:`FORMER_EFFECTS` maps it)
@@ -115,11 +116,9 @@ def identify(ctx, params: ActuatorParams, starts_train: list[int], starts_holdou
     against ``params``' own form (:func:`form_of`)."""
     out: dict[str, Any] = {"findings": [], "rejected": [], "not_checkable": [], "simulation": None,
                            "updated_fields": {}}
-    if "i_q" not in ctx.sig or "omega" not in ctx.sig or not any(c in ctx.have for c in ("current_command",
-                                                                                           "torque_command")):
-        out["not_checkable"].append({"effect": EFFECT, "reason": "needs current, speed and the current or torque "
-                                     "command", "needs": ["current", "velocity|position", "current_command|"
-                                                          "torque_command"]})
+    missing = drive_replay_unavailable(ctx, EFFECT)
+    if missing:
+        out["not_checkable"].append(missing)
         return out
     tr, ho = simulate.thin(starts_train, MAX_WINDOWS), simulate.thin(starts_holdout, MAX_WINDOWS)
     if len(tr) < MIN_WINDOWS or len(ho) < MIN_WINDOWS:

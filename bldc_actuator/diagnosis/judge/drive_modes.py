@@ -35,6 +35,16 @@ MIN_WINDOWS = 6
 MAX_WINDOWS = 60
 
 
+def drive_replay_unavailable(ctx, effect: str) -> dict[str, Any] | None:
+    """The ``not_checkable`` record of a drive finding (``effect``) that only a closed-loop replay of the drive can
+    decide, when the recording lacks what that replay needs: the current, the speed and the current or torque
+    command; None when it has them. (This module's voltage-limit mode and :mod:`...drive_feedforward`'s form.)"""
+    if "i_q" in ctx.sig and "omega" in ctx.sig and any(c in ctx.have for c in ("current_command", "torque_command")):
+        return None
+    return {"effect": effect, "reason": "needs current, speed and the current or torque command",
+            "needs": ["current", "velocity|position", "current_command|torque_command"]}
+
+
 def _near_limit(ctx) -> np.ndarray:
     """Per raw sample: does the nominal model's steady voltage demand, or the recorded voltage, reach NEAR_LIMIT
     of the circle?"""
@@ -94,11 +104,9 @@ def identify(ctx, params: ActuatorParams, window_s: float, *, wanted: bool = Tru
     out: dict[str, Any] = {"findings": [], "rejected": [], "not_checkable": [], "simulation": None}
     if not wanted:
         return out
-    if "i_q" not in ctx.sig or "omega" not in ctx.sig or not any(c in ctx.have for c in ("current_command",
-                                                                                           "torque_command")):
-        out["not_checkable"].append({"effect": name, "reason": "needs current, speed and the current or torque "
-                                     "command", "needs": ["current", "velocity|position", "current_command|"
-                                                          "torque_command"]})
+    missing = drive_replay_unavailable(ctx, name)
+    if missing:
+        out["not_checkable"].append(missing)
         return out
     near = _near_limit(ctx)
     tr, why_tr = _stable_windows(ctx, _limit_windows(ctx, "train", window_s, near), window_s, params)
