@@ -649,7 +649,7 @@ class ActuatorNode(Node):
         meta = {"node": self.get_fully_qualified_name(), "joint_name": self.joints[0].name,
                 "joints": ",".join(j.name for j in self.joints),
                 "time": "log_time = simulation time [ns]", "package": "bldc_actuator"}
-        # when the logged q/d voltage acts (the kernel's held voltage at each publish instant): the diagnosis reads it
+        # when the logged q/d voltage acts (the held voltage at each ~/q_axis_state instant): the diagnosis reads it
         decl = {j.name: kernel_declaration(self.plant.params(j.name),
                                          self.scheduler.config.detail_period_ns * 1e-9) for j in self.joints}
         first = decl[self.joints[0].name]
