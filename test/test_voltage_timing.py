@@ -155,12 +155,13 @@ def test_the_kernels_own_csv_gives_the_true_resistance_with_its_declared_timing(
 
 @pytest.mark.parametrize("seed", [0, 1])
 def test_the_kernels_closed_loop_recording_gives_the_true_resistance_when_declared(seed):
-    """The tests' closed-loop joint (PD at 1 kHz around the kernel, 0.03 A / 0.02 V log noise), with the kernel's
-    declaration as its writers make it: R within 2 sd of 0.17 Ω (sd 0.001); undeclared 0.1624 / 0.1641."""
+    """The tests' closed-loop joint (PD at 1 kHz around the kernel, 0.03 A / 0.02 V log noise), declaring the
+    kernel's timing as the project's writers do: R within 2 sd of 0.17 Ω (sd 0.001); undeclared 0.1624 / 0.1641."""
     sig = closed_loop_recording(P, P, triangle_then_sines, duration=16.0, seed=seed)
-    R0, sd0, _ = _resistance(sig)
-    sig.meta["voltage_timing"] = vt.from_metadata(vt.kernel_declaration(P, 1e-3), "test")
+    assert sig.meta["voltage_timing"] == vt.VoltageTiming("applied", -5e-5, "closed_loop_recording")
     R, sd, ctx = _resistance(sig)
+    sig.meta["voltage_timing"] = None
+    R0, sd0, _ = _resistance(sig)
     assert ctx.voltage_convention == "applied"
     assert any("declared by the recording" in n for n in ctx.notes)
     assert abs(R - 0.17) < 2 * sd, (R, sd)
