@@ -38,9 +38,9 @@ def closed_loop_recording(truth: ActuatorParams, nominal: ActuatorParams, refere
     ``disturbance(t)``: an unlogged external torque at the output [N*m]. ``report_limit``: while the command is
     clamped at ``cmd_limit`` the drive logs the current as exactly that limit (as real drives log a limited
     current). The q/d voltage is the kernel's held one, declared as the project's writers declare it
-    (``meta["voltage_timing"]``: ``applied``, -T/2 at the default drive). Noise is drawn per sample in the order current, current_d, voltage_q, voltage_d (, winding, housing
-    when ``noise_T`` is given, whether or not those are in ``channels``): one ``seed`` gives one noise sequence
-    whichever channels are kept. The one closed-loop recorder of the tests (the diagnosis analysis, significance,
+    (``meta["voltage_timing"]``: ``applied``, -T/2 at the default drive). Noise is drawn per sample in the order
+    current, current_d, voltage_q, voltage_d (, winding, housing when ``noise_T`` is given, whether or not those are
+    in ``channels``): one ``seed`` gives one noise sequence whichever channels are kept. The one closed-loop recorder of the tests (the diagnosis analysis, significance,
     issue-14 format/verdict and judge tests all record through it)."""
     rng = np.random.default_rng(seed)
     act = Actuator(truth)
