@@ -207,3 +207,13 @@ def test_the_node_recorder_metadata_round_trips(tmp_path):
     from bldc_actuator.diagnosis.io.mcapio import declared_voltage_timing
     rec_meta = [("bldc_actuator", meta)]
     assert declared_voltage_timing(rec_meta, "knee", path).acts_after_sample_s == pytest.approx(-3e-5)
+
+
+def test_the_command_line_offers_every_timing_the_equation_knows():
+    from bldc_actuator.cli import build_parser
+
+    parser = build_parser()
+    for timing in ee.VOLTAGE_TIMINGS:
+        args = parser.parse_args(["diagnose", "run.csv", "--params", "defaults", "--voltage-timing", timing])
+        assert args.voltage_timing == timing
+    assert set(ee.VOLTAGE_TIMINGS) == {"auto", "applied", "command", "sample"}
