@@ -644,10 +644,19 @@ class ActuatorNode(Node):
 
     def _open_recorder(self, path: str) -> None:
         from .recording import McapRecorder
+        from .voltage_timing import kernel_declaration
 
         meta = {"node": self.get_fully_qualified_name(), "joint_name": self.joints[0].name,
                 "joints": ",".join(j.name for j in self.joints),
                 "time": "log_time = simulation time [ns]", "package": "bldc_actuator"}
+        # when the logged q/d voltage acts (the held voltage at each ~/q_axis_state instant): the diagnosis reads it
+        decl = {j.name: kernel_declaration(self.plant.params(j.name),
+                                         self.scheduler.config.detail_period_ns * 1e-9) for j in self.joints}
+        first = decl[self.joints[0].name]
+        meta.update(first)
+        for name, d in decl.items():
+            if d != first:
+                meta.update({f"{k}.{name}": v for k, v in d.items()})
         self.recorder = McapRecorder(path, parameters=self.all_parameters(), metadata=meta)
         topics = [(self.pub_joint, JointState), (self.pub_diag, DiagnosticArray),
                   (self.sub_commands, Float64MultiArray)]

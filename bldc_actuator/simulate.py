@@ -18,6 +18,7 @@ import numpy as np
 from . import profiles
 from .model import Actuator, SimResult
 from .params import ActuatorParams, ParameterError, load_preset, load_yaml
+from .voltage_timing import csv_comment_lines, kernel_declaration
 
 #: columns written to the CSV, in order, with units
 CSV_COLUMNS = [
@@ -105,8 +106,16 @@ def build_profile(args) -> profiles.Profile:
 
 
 def write_csv(result: SimResult, path: Path) -> None:
+    """Every signal of ``result`` at its sample rate, after ``# key: value`` comment lines that declare when the
+    logged voltage acts (the kernel's held voltage: :func:`bldc_actuator.voltage_timing.kernel_declaration`; read
+    them with ``pandas.read_csv(path, comment="#")``)."""
     path.parent.mkdir(parents=True, exist_ok=True)
+    t = np.asarray(result["t"], float)
     with path.open("w", newline="") as fh:
+        if len(t) > 1:
+            period = float(np.median(np.diff(t)))
+            for line in csv_comment_lines(kernel_declaration(result.params, period)):
+                fh.write(line + "\n")
         w = csv.writer(fh)
         w.writerow([f"{name} [{unit}]" for name, unit in CSV_COLUMNS])
         cols = [result[name] for name, _ in CSV_COLUMNS]

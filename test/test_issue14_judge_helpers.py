@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from bldc_actuator import voltage_timing
 from bldc_actuator.diagnosis.signals import Signals
 from bldc_actuator.model import Actuator
 from bldc_actuator.params import ActuatorParams
@@ -36,9 +37,10 @@ def closed_loop_recording(truth: ActuatorParams, nominal: ActuatorParams, refere
     output torque command (``torque_command``); with ``noise_T`` [K] also the winding and housing temperatures.
     ``disturbance(t)``: an unlogged external torque at the output [N*m]. ``report_limit``: while the command is
     clamped at ``cmd_limit`` the drive logs the current as exactly that limit (as real drives log a limited
-    current). Noise is drawn per sample in the order current, current_d, voltage_q, voltage_d (, winding, housing
-    when ``noise_T`` is given, whether or not those are in ``channels``): one ``seed`` gives one noise sequence
-    whichever channels are kept. The one closed-loop recorder of the tests (the diagnosis analysis, significance,
+    current). The q/d voltage is the kernel's held one, declared as the project's writers declare it
+    (``meta["voltage_timing"]``: ``applied``, -T/2 at the default drive). Noise is drawn per sample in the order
+    current, current_d, voltage_q, voltage_d (, winding, housing when ``noise_T`` is given, whether or not those are
+    in ``channels``): one ``seed`` gives one noise sequence whichever channels are kept. The one closed-loop recorder of the tests (the diagnosis analysis, significance,
     issue-14 format/verdict and judge tests all record through it)."""
     rng = np.random.default_rng(seed)
     act = Actuator(truth)
@@ -85,7 +87,10 @@ def closed_loop_recording(truth: ActuatorParams, nominal: ActuatorParams, refere
             act.set_load_torque(float(disturbance(t[k])))
         act.set_current_command(cmd)
         act.step(dt)
-    return Signals(t, {k: v for k, v in out.items() if k in channels}, source="synthetic")
+    # logged like the project's writers log the kernel: the voltage it holds at each sample, declared as such
+    timing = voltage_timing.from_metadata(voltage_timing.kernel_declaration(truth, dt), "closed_loop_recording")
+    return Signals(t, {k: v for k, v in out.items() if k in channels}, source="synthetic",
+                   meta={"voltage_timing": timing})
 
 
 def open_loop_recording(truth: ActuatorParams, profile, *, rate: float = 1000.0) -> Signals:

@@ -73,6 +73,10 @@ def test_node_recording_diagnosed_closes_the_loop(tmp_path):
     dump_yaml(nominal.replace(**{"effects.coulomb_friction": true_tau_c}), truth)
     run_demo(str(truth), tmp_path, domain_id=next_domain_id(), plot=False)
     sig = clean(load(tmp_path / "demo.mcap", params=nominal), params=nominal)
+    # the node declares when its logged voltage acts (held over the loop period ending at each 1 kHz sample)
+    timing = sig.meta["voltage_timing"]
+    assert timing.convention == "applied"
+    assert timing.acts_after_sample_s == pytest.approx(-0.5 / nominal.drive.current_loop_rate)
     rep = diagnose(sig, nominal, options=DiagnoseOptions(progress=False))
     assert [f["effect"] for f in rep.to_dict()["findings"]] == ["coulomb_friction"]
     fitted = rep.finding("coulomb_friction")["parameters"]["coulomb_friction"]

@@ -172,6 +172,7 @@ def test_one_recording_diagnoses_per_joint(ros_context, ros_executor, tmp_path):
         sig = loaders.load(path, joint=j.name)
         p = sig.meta["params_from_recording"]
         assert p.motor.torque_constant_q == node.plant.params(j.name).motor.torque_constant_q
+        assert sig.meta["voltage_timing"].convention == "applied"     # the node declares its held voltage
         assert p.drive.bus_voltage == node.plant.params(j.name).drive.bus_voltage
         # the joint's own current and motor-side angle (output angle x ITS gear ratio)
         assert abs(sig.channels["current"][-1] - node.plant.actuator(j.name).state.i_q) < 1e-9

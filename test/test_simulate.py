@@ -16,7 +16,7 @@ def test_simulate_csv_profile_writes_all_signals(tmp_path, capsys):
                "--no-plot", "--preset", "ak80_9"])
     assert rc == 0
     with (tmp_path / "run.csv").open() as fh:
-        rows = list(csv.reader(fh))
+        rows = list(csv.reader(line for line in fh if not line.startswith("#")))
     header = rows[0]
     assert header[0] == "t [s]" and "i_phase_a [A]" in header and "T_winding [degC]" in header
     data = np.array(rows[1:], dtype=float)
@@ -64,7 +64,7 @@ def _simulate_csv(tmp_path, name, rows, *extra):
     assert main(["simulate", "--profile", "csv", "--input", str(src), "--out", str(tmp_path / name), "--no-plot",
                  "--preset", "ak80_9", *extra]) == 0
     with (tmp_path / f"{name}.csv").open() as fh:
-        data = list(csv.reader(fh))
+        data = list(csv.reader(line for line in fh if not line.startswith("#")))
     return data[0], np.array(data[1:], dtype=float)
 
 

@@ -59,12 +59,15 @@ def register(subparsers) -> None:
     p.add_argument("--no-simulation-gate", dest="simulation_gate", action="store_false",
                    help="accept in equation-error space only (the simulated verdict is still reported per finding)")
     p.add_argument("--cutoff", type=float, metavar="HZ", help="parallel low-pass cut-off (default min(fs/10, 100 Hz))")
-    p.add_argument("--voltage-timing", choices=("auto", "command", "sample"), default="auto",
+    p.add_argument("--voltage-timing", choices=("auto", "applied", "command", "sample"), default="auto",
                    help="how the logged voltage is timed where the log shows no frame delay on its d axis (one "
-                        "it shows always places the voltage): 'command' = the voltage the drive computed from the "
-                        "current sample it is logged with (acts drive.current_loop_delay + half a loop period later); "
-                        "'sample' = the voltage acting at its sample; 'auto' (default) = 'command' where the log "
-                        "shows that pairing's noise signature, else 'sample'")
+                        "it shows always places the voltage): 'applied' = the voltage held at the sample (this "
+                        "project's node, simulate CSV and kernel: held over the loop period the sample ends, it acts "
+                        "half a loop period BEFORE the sample, + drive.current_loop_delay); 'command' = the voltage "
+                        "the drive computed from the current sample it is logged with (acts drive.current_loop_delay "
+                        "+ half a loop period later); 'sample' = the voltage acting at its sample; 'auto' (default) = "
+                        "what the recording declares (this project's MCAP and CSV files do), else 'command' where the "
+                        "log shows that pairing's noise signature, else 'sample'")
     p.add_argument("--window", type=float, default=0.1, metavar="S", help="replay window length (default 0.1 s)")
     p.add_argument("--no-plots", action="store_true", help="Markdown report without PNGs")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")

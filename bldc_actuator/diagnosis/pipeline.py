@@ -64,8 +64,8 @@ class DiagnoseOptions:
     tolerance: float = 0.05                   #: a parameter-change finding must move its parameter by more
     max_relative_uncertainty: float = 0.5     #: every accepted value must be identified this well (sd/|value|)
     progress: bool | Callable[[str], None] = False   #: True: one line per stage on stderr
-    #: how the logged voltage is timed against its samples: auto | command | sample
-    #: (:data:`.frame.equation_error.VOLTAGE_TIMINGS`)
+    #: how the logged voltage is timed against its samples: auto (the recording's declaration first) | applied |
+    #: command | sample (:data:`.frame.equation_error.VOLTAGE_TIMINGS`)
     voltage_timing: str = "auto"
 
     def validated_effects(self) -> list[str]:

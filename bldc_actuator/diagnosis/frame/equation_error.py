@@ -29,6 +29,7 @@ import numpy as np
 from scipy import signal as sps
 
 from ... import effects, frames
+from ... import voltage_timing as vt
 from ...params import ActuatorParams
 
 EQUATIONS = ("mechanical", "electrical")
@@ -357,6 +358,11 @@ class Context:
     dead_time_sign: str | None = None
     #: how the logged voltage is timed against its samples (:data:`VOLTAGE_TIMINGS`)
     voltage_timing: str = "auto"
+    #: the timing the recording declares in its metadata (:func:`declared_timing`), None: it declares none
+    declared_timing: vt.VoltageTiming | None = None
+    #: the convention the voltage equation reads the logged voltage with (:func:`voltage_shift`): "command" (computed
+    #: from the current sample logged with it), "applied" (held at the sample), None (at its sample, or a frame delay)
+    voltage_convention: str | None = None
     _col_cache: dict = field(default_factory=dict)
     _inst_cache: dict = field(default_factory=dict)
     _cross_cache: dict = field(default_factory=dict)
@@ -563,7 +569,8 @@ def prepare(parts: list[tuple[Any, bool]], params: ActuatorParams, *, fc: float 
     if voltage_timing not in VOLTAGE_TIMINGS:
         raise ValueError(f"voltage_timing: expected one of {', '.join(VOLTAGE_TIMINGS)}, got {voltage_timing!r}")
     ctx = Context(params=params, t=t, segments=segments, fs=fs, dec=dec, have=set(raw), raw=raw, valid=valid,
-                  notes=notes, steady=steady, part_starts=tuple(starts), voltage_timing=voltage_timing)
+                  notes=notes, steady=steady, part_starts=tuple(starts), voltage_timing=voltage_timing,
+                  declared_timing=declared_timing([sig for sig, _ in parts]))
     if len(parts) > 1 and any(h for _, h in parts):
         ctx.holdout_raw = np.concatenate(hold)
     else:
@@ -607,23 +614,87 @@ def voltage_alignment(ctx: Context) -> float | None:
 
 #: how a recording's voltage is timed against its samples where the log shows no frame delay on its d axis (a frame
 #: delay it shows always places the voltage: :func:`voltage_at_sample`) (``DiagnoseOptions.voltage_timing``,
-#: ``--voltage-timing``): ``command`` = the voltage the drive computed from the sample it is logged with (acting the
-#: nominal computation delay + half a loop period later); ``sample`` = the voltage acting at its sample; ``auto`` =
-#: ``command`` where the log shows that pairing's noise signature (:func:`voltage_alignment`), else ``sample``
-VOLTAGE_TIMINGS = ("auto", "command", "sample")
+#: ``--voltage-timing``; the conventions: :mod:`bldc_actuator.voltage_timing`): ``applied`` = the voltage held at the
+#: sample (this project's kernel, node and CSV writer: held over the loop period the sample ends, it acted half a
+#: period BEFORE the sample); ``command`` = the voltage the drive computed from the sample it is logged with (acting
+#: the nominal computation delay + half a loop period later); ``sample`` = the voltage acting at its sample; ``auto``
+#: = the convention the recording declares in its metadata (:func:`declared_timing`), else ``command`` where the log
+#: shows that pairing's noise signature (:func:`voltage_alignment`), else ``sample``
+VOLTAGE_TIMINGS = ("auto", *vt.CONVENTIONS)
 
 
-def command_voltage_shift(ctx: Context, why: str) -> float:
+def declared_timing(recordings) -> vt.VoltageTiming | None:
+    """The voltage timing the recordings declare (``meta["voltage_timing"]``, set by the loaders from an MCAP's
+    metadata record or a CSV's comment lines); None when none declares one. Recordings that declare different
+    conventions are an error (diagnose them apart, or say which with ``--voltage-timing``)."""
+    found = [m for m in (getattr(sig, "meta", {}).get("voltage_timing") for sig in recordings) if m is not None]
+    if not found:
+        return None
+    if len({(m.convention, m.acts_after_sample_s) for m in found}) > 1:
+        raise ValueError("voltage_timing: the recordings declare different timings of their voltage ("
+                         + "; ".join(f"{m.convention} in {m.source}" for m in found) + "): diagnose them apart")
+    return found[0]
+
+
+def voltage_shift(ctx: Context) -> float | None:
+    """[s] how long after its sample the logged q voltage acts (negative: before it), by ``ctx.voltage_timing`` and
+    the recording's declaration, where the log shows no frame delay; None: read at its sample. Sets
+    ``ctx.voltage_convention``. ``auto`` takes a declared convention first (the writer knows what it logged),
+    else the log's pairing signature (:func:`voltage_alignment`); a given convention overrides a declared one (said
+    in the notes). A declared offset (the writer's, for its own sample instants) is used as declared."""
+    timing, dec = ctx.voltage_timing, ctx.declared_timing
+    if timing == "auto" and dec is None:
+        shift = voltage_alignment(ctx)
+        ctx.voltage_convention = "command" if shift is not None else None
+        return shift
+    if timing == "auto":
+        timing, why = dec.convention, f"declared by the recording: {dec.source}"
+    else:
+        why = f"the user says so (--voltage-timing {timing})"
+        if dec is not None and dec.convention != timing:
+            ctx.notes.append(f"voltage equation: the recording declares its voltage timing {dec.convention!r} "
+                             f"({dec.source}); --voltage-timing {timing} overrides it")
+    offset = dec.acts_after_sample_s if dec is not None and dec.convention == timing else None
+    if timing == "sample":
+        ctx.notes.append(f"voltage equation: the logged voltage acts at its sample ({why})")
+        return None
+    ctx.voltage_convention = timing
+    if timing == "command":
+        return command_voltage_shift(ctx, why, offset)
+    return applied_voltage_shift(ctx, why, offset)
+
+
+def command_voltage_shift(ctx: Context, why: str, offset: float | None = None) -> float:
     """[s] how long after its sample a voltage the drive computed from that sample acts: the nominal computation
-    delay (``drive.current_loop_delay``) + half a loop period (the hold); noted with ``why``. A free rotor read at the
-    sample instead carries K² shift / J of apparent resistance (gym-electric-motor's drive, 150 µs, J 9e-5 kg·m²:
-    +0.0092 Ω)."""
+    delay (``drive.current_loop_delay``) + half a loop period (the hold), or a declared ``offset``; noted with
+    ``why``. A free rotor read at the sample instead carries K² shift / J of apparent resistance (gym-electric-motor's
+    drive, 150 µs, J 9e-5 kg·m²: +0.0092 Ω)."""
     d = ctx.params.drive
-    shift = d.current_loop_delay + 0.5 / d.current_loop_rate
+    shift = vt.command_offset(1.0 / d.current_loop_rate, d.current_loop_delay) if offset is None else offset
+    how = "the nominal computation delay + half a loop period" if offset is None else "as declared"
     ctx.notes.append(f"voltage equation: the logged voltage was computed from the current sample logged with it "
-                     f"({why}): it acts {1e6 * shift:.3g} µs after the sample (the nominal computation delay + half a "
-                     f"loop period)")
+                     f"({why}): it acts {1e6 * shift:.3g} µs after the sample ({how})")
     return shift
+
+
+def applied_voltage_shift(ctx: Context, why: str, offset: float | None = None) -> float:
+    """[s] when the voltage held at each sample (``applied``: the kernel's log) acts after it: a declared ``offset``,
+    else the kernel's hold for samples at the log rate from a tick with the nominal loop rate and computation delay
+    (:func:`bldc_actuator.voltage_timing.applied_offset`; -T/2 for a delay of 0 or T); noted with ``why``. Read at
+    the sample instead, a free rotor's resistance comes out K² (T/2) / J LOW (this project's closed-loop recording,
+    K 0.091 N·m/A, J 6e-5 kg·m², T 100 µs: -0.0069 Ω predicted, R 0.1624-0.1645 found for 0.17)."""
+    if offset is None:
+        d = ctx.params.drive
+        loop_ns = int(round(1e9 / d.current_loop_rate))
+        offset = vt.applied_offset(int(round(1e9 / ctx.fs)), loop_ns,
+                                   min(int(round(d.current_loop_delay * 1e9)), loop_ns))
+        how = "the voltage held over the loop period at the sample, nominal loop rate and computation delay"
+    else:
+        how = "as declared"
+    ctx.notes.append(f"voltage equation: the logged voltage is the one applied at its sample ({why}): it acts "
+                     f"{1e6 * offset:+.3g} µs after the sample ({how}); the equation reads it "
+                     f"{1e6 * abs(offset):.3g} µs {'later' if offset < 0 else 'earlier'}")
+    return offset
 
 
 def _same_sample_correlation(ctx: Context):
@@ -663,23 +734,32 @@ def acting_v_q(S: dict, pole_pairs: int) -> np.ndarray:
 
 def voltage_at_sample(ctx: Context, earlier: float = 0.0) -> np.ndarray:
     """The q voltage acting on the winding at each sample's instant (``earlier`` [s] before it), where the recording's
-    voltage frame delay d is known (:func:`frame_delay`): the d/q vector logged d (+ ``earlier``) EARLIER (linear
-    interpolation within each segment, the edge held), turned back by p ω d. A voltage that acts d after its sampling instant acts in the states (current,
-    speed) of that later instant too, not only in the rotor's frame: read against the states of its own sample, the
-    back-EMF term misses ``K d dω/dt``, and in free motion ``dω/dt ≈ K i_q / J``, so a resistance ``K² d / J``
-    too high appears (motulator's drive, d = 1.5 periods = 150 µs, K 0.0743 N·m/A, J 6e-5 kg·m²: +0.0138 Ω on
-    every case, R 0.182 found as 0.193). Without a known delay: the logged ``v_q``."""
+    voltage frame delay d is known (:func:`frame_delay`): the d/q vector logged d (+ ``earlier``) EARLIER
+    (:func:`logged_earlier`), turned back by p ω d. A voltage that acts d after its sampling instant acts in the
+    states (current, speed) of that later instant too, not only in the rotor's frame: read against the states of its
+    own sample, the back-EMF term misses ``K d dω/dt``, and in free motion ``dω/dt ≈ K i_q / J``, so a resistance
+    ``K² d / J`` too high appears (motulator's drive, d = 1.5 periods = 150 µs, K 0.0743 N·m/A, J 6e-5 kg·m²:
+    +0.0138 Ω on every case, R 0.182 found as 0.193). Without a known delay: the logged ``v_q``."""
     S = ctx.sig
     if "frame_delay" not in S or "v_d" not in S:
         return S["v_q"]
-    d = float(S["frame_delay"])
-    shifted = {"v_q": np.array(S["v_q"], dtype=float), "v_d": np.array(S["v_d"], dtype=float),
+    d = float(S["frame_delay"]) + earlier
+    shifted = {"v_q": logged_earlier(ctx, "v_q", d), "v_d": logged_earlier(ctx, "v_d", d),
                "omega": S["omega"], "frame_delay": S["frame_delay"]}
-    t = ctx.t
-    for a, b in ctx.segments:
-        for k in ("v_q", "v_d"):
-            shifted[k][a:b] = np.interp(t[a:b] - d - earlier, t[a:b], S[k][a:b])
     return acting_v_q(shifted, ctx.params.motor.pole_pairs)
+
+
+def logged_earlier(ctx: Context, name: str, d: float) -> np.ndarray:
+    """The derived signal ``ctx.sig[name]`` as logged ``d`` [s] EARLIER (``d < 0``: later), to first order:
+    ``x(t - d) = x - d dx/dt`` with the rate from central differences within each segment (the one reading of "the
+    voltage logged d earlier": the frame delay's and the voltage timing's). First order, so a fitted voltage-rate
+    column (``v - δ dv/dt``, :func:`.candidates.col_delay`) adds to it exactly (the delay d + δ); for the delays it
+    serves (up to 1.5 loop periods, a fraction of a log sample) its in-band error is below linear interpolation's,
+    which it replaces (at 100 Hz, 0.15 sample of a 1 kHz log: interpolation -2.5 % in amplitude, this +0.4 %;
+    motulator seed 0: R on tp_resistance 0.17891 -> 0.17904 for 0.182, every verdict the same)."""
+    S = ctx.sig
+    rate = S["dv_dt"] if name == "v_q" else ctx.memo(("rate", name), lambda: _gradient(S[name], ctx.t, ctx.segments))
+    return S[name] - d * rate
 
 
 def frame_delay(ctx: Context) -> tuple[float, float] | None:
@@ -1028,16 +1108,12 @@ def _build_blocks(ctx: Context) -> None:
                              f"after its sampling instant, in a frame the rotor has turned by p ω d since (from the "
                              f"d-axis equation; a PWM that holds it in stator coordinates): the q equation at each "
                              f"sample uses the voltage logged d earlier, turned back by p ω d")
-        # without a frame delay, the log's own pairing of voltage and current sample says when the voltage acts
-        # (a frame delay already places it: one shift, not two)
-        shift = None
-        if fd is None and ctx.voltage_timing == "command":
-            shift = command_voltage_shift(ctx, "the user says so (--voltage-timing command)")
-        elif fd is None and ctx.voltage_timing == "auto":
-            shift = voltage_alignment(ctx)
+        # without a frame delay, the recording's declared timing, the user's, or the log's own pairing of voltage and
+        # current sample says when the voltage acts (a frame delay already places it: one shift, not two)
+        shift = voltage_shift(ctx) if fd is None else None
         if shift is not None:   # the voltage that drives the sampled current: the one logged ``shift`` earlier
             S["voltage_alignment"] = np.array(shift)
-            v_q = v_q - shift * S["dv_dt"]
+            v_q = logged_earlier(ctx, "v_q", shift)
         y = v_q - S["R"] * S["i_q"] - m.q_inductance * S["di_dt"] - S["K"] * S["omega"] \
             - m.pole_pairs * S["omega"] * m.q_inductance * S["i_d"]
         ok = ctx.valid["voltage_q"] & ctx.valid["current"] & ctx.valid["omega"] & ctx.valid["i_d"]

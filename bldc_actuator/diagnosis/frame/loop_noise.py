@@ -156,8 +156,11 @@ def voltage_rate_cross(ctx) -> dict[str, float]:
     aliased onto the log's band when the log keeps every m-th tick) and drives the real current, so the residual's
     noise is the sensor's own, ``-(R + L D) n`` (``D`` the central difference): the column and the residual share
     ``2 int |H|^4 Re[D G (R + L D)^*] sigma^2/f_tick df`` per row -- a voltage that seems to act later than it does
-    (10 kHz drive log, 0.07 A per phase: +16 us; 0.25 A: +173 us). 0 without sensor noise or alignment."""
-    if "electrical" not in ctx.blocks or "voltage_alignment" not in ctx.sig:
+    (10 kHz drive log, 0.07 A per phase: +16 us; 0.25 A: +173 us). 0 without sensor noise or alignment, and for a
+    voltage logged as applied (``ctx.voltage_convention``: the kernel's own log, computed a tick before from a current
+    its loop sees without the log's noise)."""
+    if "electrical" not in ctx.blocks or "voltage_alignment" not in ctx.sig \
+            or getattr(ctx, "voltage_convention", None) == "applied":
         return {"electrical": 0.0}
     return {"electrical": ctx.memo(("loop_noise_voltage_rate_cross",), lambda: _voltage_rate_cross(ctx))}
 

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ... import voltage_timing as vt
 from ..signals import CANONICAL, DataIssue, Signals
 from .mapping import TARGETS, LoadError, Mapping, parse_expression
 
@@ -56,7 +57,9 @@ def load_csv(path: str | Path, mapping: Mapping | None = None, params=None, *,
     ``aux`` (name -> expression, same syntax as a mapping) reads extra non-canonical columns into
     ``meta["aux"]``; a missing aux column is skipped (listed in ``meta["aux_missing"]``).
     ``only_mapped``: use the mapping alone (do not also pick up columns that happen to carry canonical
-    names; the real-data adapters use this)."""
+    names; the real-data adapters use this). ``# key: value`` comment lines before the header are the file's
+    declarations (``meta["declared"]``); the voltage timing among them (this project's writers declare it:
+    :mod:`bldc_actuator.voltage_timing`) is ``meta["voltage_timing"]``."""
     path = Path(path)
     mapping = mapping or Mapping()
     try:
@@ -169,7 +172,17 @@ def load_csv(path: str | Path, mapping: Mapping | None = None, params=None, *,
     unused = [h for h in header if h not in used] if not headerless else []
     semantics = {t: f"column {mapping.describe().get(t, header[k] if k < width else f'#{k}')}"
                  for t, k in targets.items()}
+    declared = vt.parse_csv_comments(raw_lines)
+    try:
+        timing = vt.from_metadata(declared, f"{path.name} comment lines")
+    except ValueError as exc:
+        raise LoadError(f"{path}: {exc}") from None
+    if timing is not None:
+        notes.append(f"the file declares its voltage timing: {timing.convention}"
+                     + (f" (acts {1e6 * timing.acts_after_sample_s:+.3g} µs after its sample)"
+                        if timing.acts_after_sample_s is not None else ""))
     meta = {"format": "csv", "mapping": mapping.describe(), "semantics": semantics, "notes": notes,
+            "declared": declared, "voltage_timing": timing,
             "unused_columns": unused, "gear_ratio": float(params.gear.gear_ratio) if params is not None else None,
             "params_from_recording": None, "first_data_line": data_rows[0][0],
             "line_numbers": np.asarray(lines, dtype=np.int64), "aux": aux_values, "aux_missing": aux_missing,

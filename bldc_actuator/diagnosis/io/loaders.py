@@ -154,7 +154,13 @@ def load_many(paths: list[str | Path], *, params=None, profile=None) -> Signals:
             issues.append(i)
     first = parts[0].meta
     meta = {k_: first.get(k_) for k_ in ("profile", "profile_path", "description", "licence", "hints",
-                                          "clean_limits", "gear_ratio", "steady_state_points") if k_ in first}
+                                          "clean_limits", "gear_ratio", "steady_state_points", "voltage_timing")
+            if k_ in first}
+    declared = [p.meta.get("voltage_timing") for p in parts]
+    if len({None if d is None else (d.convention, d.acts_after_sample_s) for d in declared}) > 1:
+        raise LoadError(f"{', '.join(map(str, paths))}: the files declare different voltage timings ("
+                        + ", ".join(f"{Path(p.source).name}: {d.convention if d else 'none'}"
+                                    for p, d in zip(parts, declared)) + "): load them apart")
     meta.update({"aux": {c: np.concatenate(v) for c, v in aux.items()}, "notes": [],
                  "semantics": dict(parts[-1].meta["semantics"]), "files": [Path(p.source).name for p in parts],
                  "time_offset_s": t0})

@@ -443,6 +443,27 @@ def _recorded_parameters(metadata: list[tuple[str, dict]]) -> dict | None:
         return None
 
 
+def declared_voltage_timing(metadata: list[tuple[str, dict]], joint: str | None, path: Path):
+    """The voltage timing the last ``bldc_actuator`` metadata record declares (a joint's own keys,
+    ``voltage_timing.<joint>``, over the record's), or None; a malformed one is a :class:`LoadError`."""
+    from ... import voltage_timing as vt
+
+    rec = None
+    for name, r in metadata:
+        if name == "bldc_actuator" and isinstance(r, dict) and vt.CONVENTION_KEY in r:
+            rec = r
+    if rec is None:
+        return None
+    keys = (vt.CONVENTION_KEY, vt.OFFSET_KEY)
+    decl = {k: rec[k] for k in keys if k in rec}
+    if joint is not None:
+        decl.update({k: rec[f"{k}.{joint}"] for k in keys if f"{k}.{joint}" in rec})
+    try:
+        return vt.from_metadata(decl, "MCAP metadata record bldc_actuator" + (f", joint {joint}" if joint else ""))
+    except ValueError as exc:
+        raise LoadError(f"{path}: {exc}") from None
+
+
 def _params_from_flat(flat: dict | None):
     if not flat:
         return None
@@ -631,7 +652,12 @@ def load_mcap(path: str | Path, mapping: Mapping | None = None, params=None, joi
             meta_start = (str(rec["start_time"]), f"recording metadata ({name}.start_time)")
         if isinstance(rec, dict) and rec.get("actuator_id"):
             meta_aid = str(rec["actuator_id"])
-    meta = {"format": "mcap", "own_recording": own, "joint": joint if joints else None,
+    timing = declared_voltage_timing(metadata, joint if joints else None, path)
+    if timing is not None:
+        notes.append(f"the recording declares its voltage timing: {timing.convention}"
+                     + (f" (acts {1e6 * timing.acts_after_sample_s:+.3g} µs after its sample)"
+                        if timing.acts_after_sample_s is not None else ""))
+    meta = {"format": "mcap", "own_recording": own, "joint": joint if joints else None, "voltage_timing": timing,
             "mapping": mapping.describe(), "semantics": semantics,
             "notes": notes, "gear_ratio": gear, "params_from_recording": params_rec,
             "recorded_parameters": rec_params, "time_base": plan[base_target][0], "t0_ns": t0,
