@@ -475,11 +475,6 @@ def judge_thermal(ctx, linear_params, thermal: dict[str, Any]) -> dict[str, dict
     return out
 
 
-def _updated(ctx, sel, lib):
-    ff = writeback.final_fit(ctx, sel)
-    return writeback.updated_params(ctx, sel, writeback.effect_parameters(ctx, sel, ff, lib), lib)[0]
-
-
 def _form_sets(ctx, sel, effect: str, lib):
     """Parameter sets of the selection ``sel`` for the replay: as fitted, then the fitted coefficients of the
     form ``effect`` moved by one standard deviation each way along each principal direction of their covariance
@@ -575,6 +570,7 @@ def arbitrate_aliases(ctx, sel, reselect, lib, starts: list[int], window_s: floa
         for sub, n_dir in ((rr[:len(sets0)], n_dir0), (rr[len(sets0):], n_dir1)):
             e = [float(np.mean(x["per_window"][ch])) for x in sub]
             spread.append(parameter_spread(e[0], e[1::2][:n_dir], e[2::2][:n_dir]))
+        # (a form whose perturbed replay fails has no spread: the window floor alone, as before)
         par = math.sqrt(sum(x * x for x in spread)) if all(math.isfinite(x) for x in spread) else 0.0
         floor = z * math.sqrt(se * se + par * par)
         worse = []
