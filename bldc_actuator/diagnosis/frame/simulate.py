@@ -174,13 +174,15 @@ def simulate_windows(ctx: Context, param_sets: list[ActuatorParams], starts: lis
     i_meas = ctx.dec.lowpass(S["i_q"])
     cmd, _ = commands(ctx)
     load = ctx.raw["torque"] if use_sensor else (ctx.raw["load_torque"] if "load_torque" in ctx.have else None)
+    i_start = start_current(ctx, i_meas)
+    w_start = start_speed(ctx)[0]
     for cols in groups.values():
-        part = _simulate_batch(ctx, [plist[c] for c in cols], st[cols], L, i_meas, cmd, load)
+        part = _simulate_batch(ctx, [plist[c] for c in cols], st[cols], L, i_start, w_start, cmd, load)
         for k, v in part.items():
             sims[k][:, cols] = v
     idx = st[None, :] + np.arange(1, L + 1)[:, None]
     if any(p.drive.dead_time > 0.0 for p in plist):   # the kernel's source of a ripple above the log's cut-off
-        as_logged(ctx, sims, S["omega_s"][st], S["omega_s"][idx])
+        as_logged(ctx, sims, w_start[st], S["omega_s"][idx])
     # the q voltage that acts on the winding (turned back by the recording's voltage frame delay, as the voltage
     # equation uses it): the drive's simulated voltage is in the rotor frame of the instant it acts; where that delay
     # is known the logged voltage is also read at the instant it acts (as the voltage equation reads it), at the
@@ -192,6 +194,87 @@ def simulate_windows(ctx: Context, param_sets: list[ActuatorParams], starts: lis
     return {**sims, "meas_i": i_meas[idx], "meas_w": S["omega_s"][idx], "meas_th": S["theta"][idx],
             "meas_v": meas_v, "idx": idx}
 
+
+
+#: the crossover of a window start's two sources, as a fraction of the recording's low-pass cut-off: below it the
+#: start speed comes from the angle and the start current from the measured current, above it from the velocity
+#: channel and the current command, where those carry the signal there (:func:`start_speed`, :func:`start_current`)
+START_CROSSOVER = 0.2
+
+#: a channel stands in for the signal above the crossover only when its gain there against the signal's own
+#: estimate is 1 within this (a delayed, unfiltered reading; a filtered velocity, a saturating loop fail)
+START_BAND_GAIN_TOLERANCE = 0.05
+
+
+def _band_gain(ctx: Context, x: np.ndarray, ref: np.ndarray, f: float, ref_noisy: bool) -> bool:
+    """True when ``x`` carries ``ref``'s content between ``f`` and the cut-off with gain 1 (within
+    :data:`START_BAND_GAIN_TOLERANCE`): the regression gain of ``x``'s band on ``ref``'s (and, where ``ref`` carries
+    noise of its own, which lowers that gain, also the reverse one: the true gain lies between the two)."""
+    a = ctx.dec.lowpass(x - ctx.dec.lowpass(x, f))
+    b = ctx.dec.lowpass(ref - ctx.dec.lowpass(ref, f))
+    ok = np.ones(len(a), bool)
+    for lo, hi in ctx.segments:                       # the filters' edge transients left out
+        m = int(math.ceil(3.0 * ctx.fs / f))
+        ok[lo:lo + m] = False
+        ok[max(lo, hi - m):hi] = False
+    a, b = a[ok], b[ok]
+    cov, vb, va = float(a @ b), float(b @ b), float(a @ a)
+    if not (cov > 0.0 and vb > 0.0):
+        return False
+    tol = START_BAND_GAIN_TOLERANCE
+    gains = (cov / vb, va / cov) if ref_noisy else (cov / vb,)
+    return all(abs(g - 1.0) <= tol for g in gains)
+
+
+def start_speed(ctx: Context) -> tuple[np.ndarray, str]:
+    """The speed [rad/s] every replay window starts from, and how it was made (issue #14). Below the crossover
+    (:data:`START_CROSSOVER` x the cut-off) the smoothed speed of the angle; above it, up to the cut-off, the velocity
+    channel advanced by its measured lag, where that channel carries the speed there (:func:`_band_gain`).
+
+    Why: nothing in a current-commanded window restores a start speed, so its error stays as a speed offset and an
+    angle ramp over the window, the same for every parameter set, and the paired comparison of two sets sees it
+    through its cross term with their difference. The angle's central-difference speed is unbiased (on the motulator
+    logs its error's regression on the true acceleration is 0.001 ms: no lag), but the 14-bit angle differenced
+    over 2 ms leaves 0.013-0.017 rad/s RMS of noise in the 20-100 Hz band, where the velocity channel's (0.02 rad/s
+    white) is 3x smaller: start error 0.0145 -> 0.0042 rad/s on motulator seed 3 tp_resistance's held-out windows."""
+    S = ctx.sig
+    w_s = S["omega_s"]
+    if ctx.steady or ctx.dec.sos is None or "velocity_channel_lag" not in S or "velocity" not in ctx.have:
+        return w_s, "the smoothed speed"
+    f = START_CROSSOVER * ctx.dec.fc
+    lag = float(S["velocity_channel_lag"])
+    v = np.array(ctx.raw["velocity"], float)
+    for a, b in ctx.segments:                        # advanced by its lag, inside each segment
+        v[a:b] = np.interp(ctx.t[a:b] + lag, ctx.t[a:b], ctx.raw["velocity"][a:b])
+    if not _band_gain(ctx, v, S["omega"], f, ref_noisy=True):
+        return w_s, "the smoothed speed (the velocity channel does not carry the speed above the crossover)"
+    # the velocity channel through the cut-off, its low band replaced by the angle's: the low-passed difference of
+    # the two readings of one speed (noise), mirrored at a segment's ends (the default odd extension about an end
+    # sample carries that sample's noise into the crossover filter's settling: 0.13 rad/s off at a first window)
+    w = np.array(w_s, float)
+    sos = sps.butter(ctx.dec.order, f / (0.5 * ctx.fs), output="sos")
+    d = S["omega"] - v
+    v_lp = ctx.dec.lowpass(v)
+    for a, b in ctx.segments:
+        if b - a > 6 * (2 * ctx.dec.order + 1):
+            w[a:b] = v_lp[a:b] + sps.sosfiltfilt(sos, d[a:b], padtype="even")
+    return w, f"the angle's speed below {f:.3g} Hz, the velocity channel (advanced {1e3 * lag:.2f} ms) above"
+
+
+def start_current(ctx: Context, i_lp: np.ndarray) -> np.ndarray:
+    """The q current [A] (as the sensors report it) every closed-loop replay window starts from: the low-passed
+    measured current ``i_lp`` below the crossover (:data:`START_CROSSOVER` x the cut-off), the recorded current
+    command above it where the current follows the command there (:func:`_band_gain`). The command carries no
+    sensor noise: on motulator seed 3 tp_resistance the start current's error 0.0169 -> 0.0063 A RMS, which the
+    drive's integrator, started from it, otherwise carries into a torque error."""
+    if ctx.steady or ctx.dec.sos is None or "current_command" not in ctx.have:
+        return i_lp
+    f = START_CROSSOVER * ctx.dec.fc
+    cmd = np.asarray(ctx.raw["current_command"], float)
+    i_q = ctx.sig["i_q"]
+    if not _band_gain(ctx, i_q, cmd, f, ref_noisy=False):
+        return i_lp
+    return ctx.dec.lowpass(i_q, f) + ctx.dec.lowpass(cmd - ctx.dec.lowpass(cmd, f))
 
 
 def _lowpass_window(ctx: Context, x: np.ndarray) -> np.ndarray:
@@ -285,6 +368,7 @@ def _simulate_current_driven(ctx: Context, param_sets: list[ActuatorParams], sta
     S = ctx.sig
     use_sensor = "torque" in ctx.have
     w_meas = S["omega_s"]
+    w_start = start_speed(ctx)[0]
     st_one = np.asarray(starts, int)
     last = len(ctx.t) - 1
     n_sub = replay_substeps(ctx.fs)
@@ -318,7 +402,7 @@ def _simulate_current_driven(ctx: Context, param_sets: list[ActuatorParams], sta
         b = BatchActuator(group, warn=False)     # the drive checks test the loop against the recording's speeds
         st = np.tile(st_one, len(js))
         th_l, w_l = window_load_states(ctx, group, st)   # the load behind a compliant transmission
-        b.set_state(i_d=0.0, i_q=0.0, omega=w_meas[st], theta=S["theta"][st], T_winding=S["T_w"][st],
+        b.set_state(i_d=0.0, i_q=0.0, omega=w_start[st], theta=S["theta"][st], T_winding=S["T_w"][st],
                     T_housing=S["T_h"][st], theta_load_out=th_l, omega_load_out=w_l)
         # a compliant transmission: the motor's torque acts on the rotor, the load's behind the spring
         on_rotor = np.array([p.gear.transmission_stiffness > 0.0 for p in group])
@@ -543,19 +627,20 @@ def window_start(plist: list[ActuatorParams], i_d_meas, i_q_meas, omega, theta, 
     return WindowStart(i_d, i_q, v, z, K)
 
 
-def _simulate_batch(ctx: Context, plist: list[ActuatorParams], st: np.ndarray, L: int, i_meas: np.ndarray,
-                    cmd: np.ndarray, load: np.ndarray | None) -> dict:
+def _simulate_batch(ctx: Context, plist: list[ActuatorParams], st: np.ndarray, L: int, i_start: np.ndarray,
+                    w_start: np.ndarray, cmd: np.ndarray, load: np.ndarray | None) -> dict:
     """One :class:`BatchActuator` over windows starting at ``st`` (one parameter set per column), driven by the
-    recorded command ``cmd`` and ``load`` and started from the low-passed current ``i_meas``."""
+    recorded command ``cmd`` and ``load`` and started from the current ``i_start`` (:func:`start_current`) and the
+    speed ``w_start`` (:func:`start_speed`)."""
     b = BatchActuator(plist, warn=False)     # the drive checks test the loop against the recording's speeds
     S = ctx.sig
     w_meas = S["omega_s"]
     T_w0, T_h0 = S["T_w"][st], S["T_h"][st]
     i_d_meas0 = ctx.dec.lowpass(S["i_d"])[st]
-    ws = window_start(plist, i_d_meas0, i_meas[st], w_meas[st], S["theta"][st], T_w0, T_h0)
+    ws = window_start(plist, i_d_meas0, i_start[st], w_start[st], S["theta"][st], T_w0, T_h0)
     K = ws.K
     th_l, w_l = window_load_states(ctx, plist, st)      # the load behind a compliant transmission
-    b.set_state(i_d=ws.i_d, i_q=ws.i_q, omega=w_meas[st], theta=S["theta"][st], T_winding=T_w0, T_housing=T_h0,
+    b.set_state(i_d=ws.i_d, i_q=ws.i_q, omega=w_start[st], theta=S["theta"][st], T_winding=T_w0, T_housing=T_h0,
                 v_d=ws.v.real, v_q=ws.v.imag, z_d=ws.z.real, z_q=ws.z.imag, i_q_ref=cmd[st],
                 theta_load_out=th_l, omega_load_out=w_l)
     dt = 1.0 / ctx.fs

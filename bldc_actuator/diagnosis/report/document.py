@@ -265,6 +265,9 @@ def _markdown(r: DiagnosisReport, images: dict[str, str]) -> str:
                   f"{_g(err['interpolate']['velocity'])} interpolated over {cmd['windows']} training windows"
                   if err else "")
             L += [f"Short-window simulation: {how}, decided by the {cmd['decided_by']}{ev}.", ""]
+        start = (c.get("replay") or {}).get("start_speed")
+        if start:
+            L += [f"Short-window simulation: each window starts at {start}.", ""]
     if r.windows:
         L += ["## When the model breaks (change points of the nominal residual)", "",
               "| equation | from [s] | to [s] | RMS | x quietest |", "|---|---|---|---|---|"]

@@ -211,6 +211,7 @@ def run(signals, params, s: Search, j: Judgement, m: Model, options, say: Say, t
     compare = {"equation_error": {eq: {"nominal": nominal_m[eq], "updated": final_m[eq]} for eq in ctx.blocks},
                "replay": {"all_windows_nominal": _strip(s.replay_nominal),
                           "command": ctx.command_replay.to_dict() if ctx.command_replay is not None else None,
+                          "start_speed": simulate.start_speed(ctx)[1] if "omega_s" in ctx.sig else None,
                           "holdout": {k: _strip(v) for k, v in replay_ho.items()} if replay_ho else None},
                "thermal": thermal_cmp,
                "output_error_refit": {k: v for k, v in oe.items() if k != "params"} if oe else None,
