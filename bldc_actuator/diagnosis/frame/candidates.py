@@ -711,9 +711,11 @@ def _compliance_rss(ctx, loc=None):
     :func:`compliance_evidence_hz`; the column filtered at the DECIMATED rate from the decimated acceleration (all
     linear: a quick stand-in for the raw-rate column, for the search only). Bias-compensated: the current sensor's
     noise that the drive's loop feeds into the motor makes the residual and the acceleration share a noise of
-    opposite signs (:mod:`.loop_noise`), whose expected cross product is taken out of the normal equations;
-    ``noise_coefficient`` is the reflected inertia that noise alone would give the column (plain least squares =
-    ``coefficient + noise_coefficient``), ``rss`` the residual left by the compensated fit."""
+    opposite signs (:mod:`.loop_noise`), whose expected cross product -- through the joint loop as the recording shows
+    it, which answers the noise through the load the coefficient describes -- is taken out of the normal equations
+    together with the coefficient (:func:`.loop_noise.compensated_solve`); ``noise_coefficient`` is the reflected
+    inertia that noise alone would give the column (plain least squares = ``coefficient + noise_coefficient``),
+    ``rss`` the residual left by the compensated fit."""
     from scipy.signal import butter, lfilter, lfilter_zi, sosfiltfilt
 
     from .loop_noise import compensated_solve, filter_cross_of_load
