@@ -215,7 +215,7 @@ def _disturbance_spectra(ctx):
 
 
 def _disturbance_transfer(ctx, f: np.ndarray):
-    """``transfer(F, b) -> W(f)`` on the grid ``f`` [Hz], or None: the transfer from the sensor's noise (as an
+    """``transfer(response, b) -> W(f)`` on the grid ``f`` [Hz], or None: the transfer from the sensor's noise (as an
     acceleration, ``-(K/J) n``) to the measured acceleration, ``W = T S_o/(1 + b F) = T/((1 + b F) + (K/J) T C/s^2)``
     with the joint controller ``C`` (current command per rad of rotor angle), when the model also holds a column
     ``F a/K`` (``F`` a callable of frequency) with coefficient ``b J``: a load behind a compliant transmission (the
@@ -224,8 +224,9 @@ def _disturbance_transfer(ctx, f: np.ndarray):
     times the noise's acceleration and, besides, the reference, which is independent of the noise, so ``S_o = 1 -
     Phi(n, i)/Phi(n, n)``; no model of the drive's current loop enters (the kernel's current follows the command
     1-2 % off the nominal loop's ``T`` while the rotor moves). ``C`` in the form ``(kp + kd s + ki/s) exp(-s tau)``
-    fitted to the bins where the command is coherent with the noise (:data:`JOINT_MIN_COHERENCE`) and used at every
-    frequency; ``T`` alone (``S_o = 1``) where that form does not explain them (:data:`JOINT_MIN_FIT`)."""
+    fitted once per recording to the bins where the command is coherent with the noise (:data:`JOINT_MIN_COHERENCE`;
+    the nominal residual as the noise) and used at every frequency and for every load; None (the caller takes ``T``,
+    ``S_o = 1``) where that form does not explain them (:data:`JOINT_MIN_FIT`) or without a recorded command."""
     spec = disturbance_spectra(ctx)
     if spec is None:
         return None
