@@ -305,12 +305,17 @@ def filter_cross(ctx, b, a, fs_filter: float, band=None, load: float = 0.0) -> d
     return {"mechanical": filter_cross_of_load(ctx, b, a, fs_filter, band)(load)}
 
 
+#: the compliance column's cross term through the joint loop as the recording shows it (False: ``S_o = 1`` and the
+#: brick-wall noise level, as before)
+JOINT_LOOP_FROM_RECORDING = True
+
+
 def filter_cross_of_load(ctx, b, a, fs_filter: float, band=None):
     """``cross(load) -> float``: :func:`filter_cross` as a function of the column's coefficient (the filter's
     response evaluated once)."""
     from scipy.signal import freqz
 
-    cross = acceleration_cross(ctx, fs_filter, band)
+    cross = acceleration_cross(ctx, fs_filter, band, joint=JOINT_LOOP_FROM_RECORDING)
     memo = {}
 
     def response(f):
