@@ -375,10 +375,24 @@ def col_compliance(f_a: float, zeta: float):
         return {"mechanical": y}
 
     def cross(ctx):
-        """the loop-fed current-sensor noise this column shares with the residual (fitted out: :mod:`.loop_noise`)"""
-        from .loop_noise import filter_cross
+        """the loop-fed current-sensor noise this column shares with the residual (fitted out: :mod:`.loop_noise`);
+        it depends on the load the coefficient describes (the joint loop answers the noise through it), so it is
+        taken at the coefficient of the column's own compensated fit beside the always-fitted nuisance columns"""
+        from .loop_noise import compensated_solve, filter_cross_of_load
 
-        return filter_cross(ctx, *compliance_filter(f_a, zeta, ctx.fs), ctx.fs)
+        if "mechanical" not in ctx.blocks:
+            return {"mechanical": 0.0}
+        cross_of = filter_cross_of_load(ctx, *compliance_filter(f_a, zeta, ctx.fs), ctx.fs)
+        rows = ctx.train_rows("mechanical")
+        col = ctx.dec.apply(np.nan_to_num(build(ctx)["mechanical"] / ctx.sig["K"]))[rows]
+        nuis = [ctx.column(k, b).get("mechanical") for k, b in ctx.nuisance.items()]
+        X = np.column_stack([col] + [c[rows] for c in nuis if c is not None])
+        y = ctx.blocks["mechanical"].target[rows]
+        try:
+            _, bias = compensated_solve(X.T @ X, X.T @ y, 0, cross_of)
+        except np.linalg.LinAlgError:
+            bias = cross_of(0.0)
+        return {"mechanical": bias}
     build.cross = cross
     return build
 
@@ -697,12 +711,14 @@ def _compliance_rss(ctx, loc=None):
     :func:`compliance_evidence_hz`; the column filtered at the DECIMATED rate from the decimated acceleration (all
     linear: a quick stand-in for the raw-rate column, for the search only). Bias-compensated: the current sensor's
     noise that the drive's loop feeds into the motor makes the residual and the acceleration share a noise of
-    opposite signs (:mod:`.loop_noise`), whose expected cross product is taken out of the normal equations;
-    ``noise_coefficient`` is the reflected inertia that noise alone would give the column (plain least squares =
-    ``coefficient + noise_coefficient``), ``rss`` the residual left by the compensated fit."""
+    opposite signs (:mod:`.loop_noise`), whose expected cross product -- through the joint loop as the recording shows
+    it, which answers the noise through the load the coefficient describes -- is taken out of the normal equations
+    together with the coefficient (:func:`.loop_noise.compensated_solve`); ``noise_coefficient`` is the reflected
+    inertia that noise alone would give the column (plain least squares = ``coefficient + noise_coefficient``),
+    ``rss`` the residual left by the compensated fit."""
     from scipy.signal import butter, lfilter, lfilter_zi, sosfiltfilt
 
-    from .loop_noise import filter_cross
+    from .loop_noise import compensated_solve, filter_cross_of_load
 
     B = ctx.blocks["mechanical"]
     rows = ctx.train_rows("mechanical")
@@ -740,9 +756,8 @@ def _compliance_rss(ctx, loc=None):
         X = np.column_stack([clean(col)[rows]] + X0)
         G, g = X.T @ X, X.T @ y
         bias = np.zeros(len(g))
-        bias[0] = filter_cross(ctx, b, a, fs_dec, (sos, fs_dec))["mechanical"]
         try:
-            beta = np.linalg.solve(G, g - bias)
+            beta, bias[0] = compensated_solve(G, g, 0, filter_cross_of_load(ctx, b, a, fs_dec, (sos, fs_dec)))
             plain = np.linalg.solve(G, g)
         except np.linalg.LinAlgError:
             return float("inf"), 0.0, 0.0

@@ -259,7 +259,7 @@ def _acceleration_instrument(ctx: Context) -> np.ndarray | None:
     xx = float(x @ x)
     if not xx > 0.0:
         return None
-    share = acceleration_cross(ctx, ctx.fs)(np.ones_like) / xx / J
+    share = acceleration_cross(ctx, ctx.fs, joint=False)(np.ones_like) / xx / J
     if not abs(share) > ACCELERATION_INSTRUMENT_MIN_SHARE:
         return None
     lag = int(round(ACCELERATION_INSTRUMENT_LAG_PERIODS * ctx.fs / ctx.dec.fc))
