@@ -32,39 +32,19 @@ from bldc_actuator.diagnosis.frame import candidates as cands  # noqa: E402
 from bldc_actuator.diagnosis.frame import equation_error as ee  # noqa: E402
 from bldc_actuator.diagnosis.io.csvio import load_csv  # noqa: E402
 from bldc_actuator.diagnosis.io.mapping import Mapping  # noqa: E402
-from bldc_actuator.model import Actuator  # noqa: E402
 from bldc_actuator.params import ActuatorParams  # noqa: E402
 from bldc_actuator.simulate import simulate_profile, write_csv  # noqa: E402
 from test_issue14_judge_helpers import closed_loop_recording, triangle_then_sines  # noqa: E402
+from test_voltage_timing import held_interval_centres  # noqa: E402
 
 P = ActuatorParams()
 
 
 def held_centre(delay_s: float, log_ns: int = 1_000_000, fine_ns: int = 1_000, n_log: int = 12) -> float:
-    """[s] mean centre of the held interval of the logged q voltage after its sample (see the module docstring)."""
-    act = Actuator(P.replace(**{"drive.current_loop_delay": delay_s}))
-    t_end, v_end, log = [], [], []
-    steps = log_ns // fine_ns
-    for k in range(n_log * steps):
-        if k % steps == 0:
-            log.append((act.t_ns, act.state.v_q))
-            act.set_current_command(1.0 + 3.0 * math.sin(2 * math.pi * 37 * act.t_ns * 1e-9))
-        act.step_ns(fine_ns)
-        t_end.append(act.t_ns)
-        v_end.append(act.state.v_q)
-    t_end, v_end = np.array(t_end), np.array(v_end)
-    out = []
-    for t_k, v_k in log[3:]:
-        i = int(np.searchsorted(t_end, t_k))         # t_end[i] == t_k: the fine step ending at the sample
-        if v_end[i] != v_k:
-            raise AssertionError("the logged voltage is not the one held up to the sample")
-        lo, hi = i, i
-        while lo > 0 and v_end[lo - 1] == v_k:
-            lo -= 1
-        while hi + 1 < len(v_end) and v_end[hi + 1] == v_k:
-            hi += 1
-        out.append(((t_end[lo] - fine_ns + t_end[hi]) / 2 - t_k) * 1e-9)
-    return float(np.mean(out))
+    """[s] mean centre of the held interval of the logged q voltage after its sample (see the module docstring;
+    measured by the test's :func:`held_interval_centres`)."""
+    p = P.replace(**{"drive.current_loop_delay": delay_s})
+    return float(np.mean(held_interval_centres(p, log_ns, n_log=n_log, fine_ns=fine_ns)))
 
 
 def resistance(sig, timing: str = "auto") -> tuple[float, float]:

@@ -38,7 +38,7 @@ SIM_MAP = Mapping.parse(["time=t [s]", "current=i_q [A]", "current_d=i_d [A]", "
                          "current_command=i_q_ref [A]"])
 
 
-def _held_interval_centres(params: ActuatorParams, log_ns: int, n_log: int = 12, fine_ns: int = 1000) -> np.ndarray:
+def held_interval_centres(params: ActuatorParams, log_ns: int, n_log: int = 12, fine_ns: int = 1000) -> np.ndarray:
     """[s] for each logged sample (a sine current command, the kernel stepped in ``fine_ns`` steps): the centre of
     the interval over which the kernel held the q voltage logged at that sample, minus the sample instant."""
     act = Actuator(params)
@@ -70,7 +70,7 @@ def test_the_kernel_logs_the_voltage_it_holds_at_the_sample(delay_us, expected_u
     period from the last switch before the sample (switches at m T + d; a delay of a whole period switches on the
     tick); its centre is where :func:`applied_offset` says, for every sample."""
     p = P.replace(**{"drive.current_loop_delay": delay_us * 1e-6})
-    centres = _held_interval_centres(p, 1_000_000)
+    centres = held_interval_centres(p, 1_000_000)
     assert np.allclose(centres, expected_us * 1e-6, atol=1e-9)
     assert vt.applied_offset(1_000_000, 100_000, delay_us * 1000) == pytest.approx(expected_us * 1e-6, abs=1e-12)
 
@@ -78,7 +78,7 @@ def test_the_kernel_logs_the_voltage_it_holds_at_the_sample(delay_us, expected_u
 def test_a_log_between_ticks_holds_the_voltage_at_every_phase():
     """A log period of 2.5 loop periods samples on a tick and half-way between (centres -50 and 0 µs): the declared
     offset is their mean."""
-    centres = _held_interval_centres(P, 250_000, n_log=21)     # 18 samples kept: 9 of each phase
+    centres = held_interval_centres(P, 250_000, n_log=21)     # 18 samples kept: 9 of each phase
     assert sorted(set(np.round(centres * 1e6, 6))) == [-50.0, 0.0]
     assert vt.applied_offset(250_000, 100_000, 0) == pytest.approx(float(np.mean(centres)), abs=1e-12)
 
