@@ -78,3 +78,17 @@ def test_a_non_finite_window_is_left_out_and_fewer_than_three_windows_give_no_pa
     assert "velocity" not in two
     three = paired_change(_replay({"velocity": v0[:3]}), _replay({"velocity": v1[:3]}))
     assert three["velocity"]["windows"] == 3
+
+
+def test_a_temperature_moves_only_beyond_the_sensor_floor():
+    """Builtin seed 7 `r_thermal` (R(T) found, 0.00392 for 0.00393): the held-out housing temperature error is
+    0.0859 K with the nominal parameters and 0.1024 K with the TRUE ones (the tool's fit: 0.1023 K), a 0.016 K
+    difference in a channel recorded at 0.1 K resolution; the true model must not score "worse" there. A rise
+    beyond the floor still does."""
+    def report(housing_after):
+        return {"compare": {"thermal": {
+            "before": {"winding_temperature": {"holdout_rms": 0.69}, "housing_temperature": {"holdout_rms": 0.0859}},
+            "after": {"winding_temperature": {"holdout_rms": 0.159},
+                      "housing_temperature": {"holdout_rms": housing_after}}}}}
+    assert simulated_verdict(report(0.1024))[0] == "better"
+    assert simulated_verdict(report(0.0859 + 0.2))[0] == "worse"
