@@ -43,51 +43,65 @@ def speed_reference(t: np.ndarray, seed: int = 0) -> np.ndarray:
 
 
 def speed_loop_recording(truth: ActuatorParams, nominal: ActuatorParams, *, loop_rate: float, duration: float = 10.0,
-                         rate: float = LOG_RATE, seed: int = 0) -> Signals:
-    """PI speed loop (12 Hz, damping 1, gains from the NOMINAL J and K) around ``truth``, computing a new current
-    command every 1 / ``loop_rate`` s; logged at ``rate`` (every ``loop_rate / rate``-th loop instant, the command
-    computed there): q/d current (0.03 A noise), angle, speed (0.02 rad/s), q/d voltage (0.01 V)."""
+                         rate: float = LOG_RATE, seed: int = 0, bandwidth_hz: float = 12.0, reference=None,
+                         encoder_step: float = 0.0, velocity_delay_ticks: int = 0,
+                         velocity_filter_hz: float | None = None) -> tuple[Signals, np.ndarray]:
+    """PI speed loop (``bandwidth_hz``, damping 1, gains from the NOMINAL J and K) around ``truth``, following
+    ``reference(t)`` [rad/s] (default :func:`speed_reference` with ``seed``), computing a new current command every
+    1 / ``loop_rate`` s; logged at ``rate`` (every ``loop_rate / rate``-th loop instant, the command computed there):
+    q/d current (0.03 A noise), angle (quantized to ``encoder_step`` [rad] when > 0), speed (0.02 rad/s; read
+    ``velocity_delay_ticks`` loop ticks late, or through a first-order ``velocity_filter_hz`` filter), q/d voltage
+    (0.01 V). Returns the recording and the true motor speed at the logged instants."""
     rng = np.random.default_rng(seed)
     act = Actuator(truth)
     J, K = nominal.motor.rotor_inertia, nominal.motor.torque_constant_q
-    wn = 2 * np.pi * 12.0
+    wn = 2 * np.pi * bandwidth_hz
     kp, ki = 2 * wn * J, wn * wn * J
     sub = int(round(loop_rate / rate))
     dt = 1.0 / loop_rate
     n = int(round(duration * rate))
-    w_ref = speed_reference(np.arange(n * sub) * dt, seed)
+    t = np.arange(n * sub) * dt
+    w_ref = speed_reference(t, seed) if reference is None else reference(t)
     names = ("current_command", "current", "current_d", "position", "velocity", "voltage_q", "voltage_d")
     out = {k: np.zeros(n) for k in names}
+    w_true = np.zeros(n)
+    hist = [0.0] * (velocity_delay_ticks + 1)
+    a_f = 1.0 - np.exp(-2 * np.pi * velocity_filter_hz * dt) if velocity_filter_hz else 1.0
+    w_filt = 0.0
     z = 0.0
     for k in range(n):
         for j in range(sub):
-            e = w_ref[k * sub + j] - act.joint_state()[1] * truth.gear.gear_ratio
+            w = act.joint_state()[1] * truth.gear.gear_ratio
+            hist = hist[1:] + [w]
+            w_filt += a_f * (w - w_filt)
+            e = w_ref[k * sub + j] - w
             cmd = (kp * e + z) / K
             z += ki * e * dt
             if j == 0:
                 s = act.state
+                w_true[k] = s.omega
                 out["current_command"][k] = cmd
                 out["current"][k] = s.i_q + 0.03 * rng.standard_normal()
                 out["current_d"][k] = s.i_d + 0.03 * rng.standard_normal()
-                out["position"][k] = s.theta
-                out["velocity"][k] = s.omega + 0.02 * rng.standard_normal()
+                out["position"][k] = np.round(s.theta / encoder_step) * encoder_step if encoder_step else s.theta
+                out["velocity"][k] = (w_filt if velocity_filter_hz else hist[0]) + 0.02 * rng.standard_normal()
                 out["voltage_q"][k] = s.v_q + 0.01 * rng.standard_normal()
                 out["voltage_d"][k] = s.v_d + 0.01 * rng.standard_normal()
             act.set_current_command(cmd)
             act.step(dt)
-    return Signals(np.arange(n) / rate, out, source="synthetic")
+    return Signals(np.arange(n) / rate, out, source="synthetic"), w_true
 
 
 @pytest.fixture(scope="module")
 def fast_loop() -> Signals:
     """The command updated at 10 kHz, logged at 1 kHz (the GEM case's drive)."""
-    return speed_loop_recording(TRUTH, NOMINAL, loop_rate=10_000.0)
+    return speed_loop_recording(TRUTH, NOMINAL, loop_rate=10_000.0)[0]
 
 
 @pytest.fixture(scope="module")
 def held_loop() -> Signals:
     """The command computed at the log rate and held until the next sample (the builtin cases' joint controller)."""
-    return speed_loop_recording(TRUTH, NOMINAL, loop_rate=LOG_RATE)
+    return speed_loop_recording(TRUTH, NOMINAL, loop_rate=LOG_RATE)[0]
 
 
 def _by_log_rate(monkeypatch) -> None:

@@ -26,8 +26,9 @@ import pytest
 from bldc_actuator.diagnosis.frame import equation_error as ee
 from bldc_actuator.diagnosis.frame import simulate
 from bldc_actuator.diagnosis.signals import Signals
-from bldc_actuator.model import Actuator
 from bldc_actuator.params import ActuatorParams
+
+from test_replay_command_hold import speed_loop_recording
 
 NOMINAL = ActuatorParams().replace(**{"motor.resistance_temperature_enabled": False, "load.load_torque": 0.25})
 LOG_RATE = 1000.0
@@ -46,45 +47,12 @@ def _speed_reference(t: np.ndarray) -> np.ndarray:
 
 def _recording(p: ActuatorParams, *, velocity_filter_hz: float | None = None, duration: float = 5.0,
                seed: int = 3) -> tuple[Signals, np.ndarray]:
-    """PI speed loop (25 Hz) computing a current command every loop tick; logged every 10th tick. Returns the
-    recording and the true motor speed at the logged instants."""
-    rng = np.random.default_rng(seed)
-    act = Actuator(p)
-    J, K = p.motor.rotor_inertia, p.motor.torque_constant_q
-    wn = 2 * np.pi * 25.0
-    kp, ki = 2 * wn * J, wn * wn * J
-    sub = int(round(LOOP_RATE / LOG_RATE))
-    dt = 1.0 / LOOP_RATE
-    n = int(round(duration * LOG_RATE))
-    w_ref = _speed_reference(np.arange(n * sub) * dt)
-    names = ("current_command", "current", "current_d", "position", "velocity", "voltage_q", "voltage_d")
-    out = {k: np.zeros(n) for k in names}
-    w_true = np.zeros(n)
-    hist = [0.0] * (VELOCITY_DELAY_TICKS + 1)
-    w_filt = 0.0
-    a_f = 1.0 - math.exp(-2 * math.pi * velocity_filter_hz * dt) if velocity_filter_hz else 1.0
-    z = 0.0
-    for k in range(n * sub):
-        s = act.state
-        hist = hist[1:] + [s.omega]
-        w_filt += a_f * (s.omega - w_filt)
-        e = w_ref[k] - s.omega
-        cmd = (kp * e + z) / K
-        z += ki * e * dt
-        if k % sub == 0:
-            m = k // sub
-            w_true[m] = s.omega
-            out["current_command"][m] = cmd
-            out["current"][m] = s.i_q + 0.03 * rng.standard_normal()
-            out["current_d"][m] = s.i_d + 0.03 * rng.standard_normal()
-            out["position"][m] = np.round(s.theta / ENCODER_STEP) * ENCODER_STEP
-            late = w_filt if velocity_filter_hz else hist[0]
-            out["velocity"][m] = late + 0.02 * rng.standard_normal()
-            out["voltage_q"][m] = s.v_q + 0.01 * rng.standard_normal()
-            out["voltage_d"][m] = s.v_d + 0.01 * rng.standard_normal()
-        act.set_current_command(cmd)
-        act.step(dt)
-    return Signals(np.arange(n) / LOG_RATE, out, source="synthetic"), w_true
+    """PI speed loop (25 Hz) computing a current command every loop tick; logged every 10th tick (the shared
+    :func:`test_replay_command_hold.speed_loop_recording` with this file's sensors). Returns the recording and the
+    true motor speed at the logged instants."""
+    return speed_loop_recording(p, p, loop_rate=LOOP_RATE, duration=duration, rate=LOG_RATE, seed=seed,
+                                bandwidth_hz=25.0, reference=_speed_reference, encoder_step=ENCODER_STEP,
+                                velocity_delay_ticks=VELOCITY_DELAY_TICKS, velocity_filter_hz=velocity_filter_hz)
 
 
 @pytest.fixture(scope="module")
