@@ -178,11 +178,10 @@ def _joint_controller(loop, coh, s, JKT, use, ki_free: bool = True):
 
 def disturbance_spectra(ctx):
     """What the recording shows of the joint controller's answer to the current sensor's noise: ``(f, Phi(e, i),
-    Phi(a, i), Phi(e, e), Phi(e, a), Phi(a, a), Phi(i, i), windows)`` at the log rate (Welch, :data:`JOINT_RESOLUTION_HZ`
-    bins), or None without a recorded current command. ``e = i_meas - P/K`` is the mechanical equation's nominal
-    residual [A] (on a nominal joint the sensor's noise ``n`` itself: the drive puts ``-T n`` into the motor and logs
-    ``T i_cmd + S n``, whatever ``T`` the drive's loop really has), ``i`` the current command, ``a`` the measured
-    acceleration. Cached on the context."""
+    Phi(e, e), Phi(i, i), windows)`` at the log rate (Welch, :data:`JOINT_RESOLUTION_HZ` bins), or None without a
+    recorded current command. ``e = i_meas - P/K`` is the mechanical equation's nominal residual [A] (on a nominal
+    joint the sensor's noise ``n`` itself: the drive puts ``-T n`` into the motor and logs ``T i_cmd + S n``, whatever
+    ``T`` the drive's loop really has), ``i`` the current command. Cached on the context."""
     return ctx.memo(("loop_noise_disturbance_spectra",), lambda: _disturbance_spectra(ctx))
 
 
@@ -193,25 +192,23 @@ def _disturbance_spectra(ctx):
     if ctx.steady or "i_inst" not in S or "P" not in S or "mechanical" not in ctx.blocks:
         return None
     fs = ctx.fs
-    e, i, a = S["i_q"] - S["P"] / S["K"], S["i_inst"], S["omega_dot"]
+    e, i = S["i_q"] - S["P"] / S["K"], S["i_inst"]
     nper = int(2 ** math.ceil(math.log2(fs / JOINT_RESOLUTION_HZ)))
     total, count, f = None, 0, None
     for lo, hi in ctx.segments:
         if hi - lo < nper:
             continue
-        x, y, z = (np.nan_to_num(v[lo:hi]) for v in (e, i, a))
+        x, y = (np.nan_to_num(v[lo:hi]) for v in (e, i))
         m = (hi - lo - nper) // (nper // 2) + 1
         f, p_ei = csd(x, y, fs, nperseg=nper)         # E[conj(E) I]
-        part = np.array([p_ei, csd(z, y, fs, nperseg=nper)[1], welch(x, fs, nperseg=nper)[1],
-                         csd(x, z, fs, nperseg=nper)[1], welch(z, fs, nperseg=nper)[1],
-                         welch(y, fs, nperseg=nper)[1]]) * m
+        part = np.array([p_ei, welch(x, fs, nperseg=nper)[1], welch(y, fs, nperseg=nper)[1]]) * m
         total = part if total is None else total + part
         count += m
     if total is None or count < 4:
         return None
     keep = (f > 0) & (f <= min(0.5 * fs, 4.0 * ctx.dec.fc))
-    p_ei, p_ai, p_ee, p_ea, p_aa, p_ii = (v[keep] for v in total / count)
-    return f[keep], p_ei, p_ai, p_ee.real, p_ea, p_aa.real, p_ii.real, count
+    p_ei, p_ee, p_ii = (v[keep] for v in total / count)
+    return f[keep], p_ei, p_ee.real, p_ii.real, count
 
 
 def _disturbance_transfer(ctx, f: np.ndarray):
@@ -230,7 +227,7 @@ def _disturbance_transfer(ctx, f: np.ndarray):
     spec = disturbance_spectra(ctx)
     if spec is None:
         return None
-    fw, p_ei, p_ai, p_ee, p_ea, p_aa, p_ii, _ = spec
+    fw, p_ei, p_ee, p_ii, _ = spec
     p = ctx.params
     J, K = p.motor.rotor_inertia, p.motor.torque_constant_q
     T = 1.0 - sensitivity(p, f)
@@ -253,8 +250,6 @@ def _disturbance_transfer(ctx, f: np.ndarray):
     def transfer(response, b: float = 0.0) -> np.ndarray:
         F = response(f) if b else 0.0
         return np.where(dc, 0.0, T / np.where(dc, 1.0, (1.0 + b * F) + loop_gain))
-    transfer.controller = ctl
-    transfer.spectra = spec
     return transfer
 
 
@@ -294,7 +289,6 @@ def _cross(ctx, fs_column: float, band, joint: bool = True):
     def cross(response, load: float = 0.0) -> float:
         W = T if transfer is None else transfer(response, load / J)
         return scale * float(np.trapezoid(np.real(response(f) * W * weight), f))
-    cross.measured = transfer is not None
     return cross
 
 
