@@ -75,14 +75,20 @@ def command_offset(loop_period_s: float, delay_s: float) -> float:
     return float(delay_s) + 0.5 * float(loop_period_s)
 
 
-def kernel_declaration(params, sample_period_s: float) -> dict[str, str]:
-    """The metadata a writer of this project's kernel outputs (``applied``) declares for samples every
-    ``sample_period_s`` [s] from a tick, for the drive of ``params`` (:class:`~bldc_actuator.params.ActuatorParams`)."""
+def kernel_applied_offset(params, sample_period_s: float) -> float:
+    """[s] :func:`applied_offset` of this project's kernel for samples every ``sample_period_s`` [s] from a tick, for
+    the drive of ``params`` (:class:`~bldc_actuator.params.ActuatorParams`: its loop rate and computation delay, the
+    delay clamped to one period as the kernel clamps it)."""
     d = params.drive
     loop_ns = int(round(1e9 / d.current_loop_rate))
     delay_ns = min(int(round(d.current_loop_delay * 1e9)), loop_ns)
-    off = applied_offset(int(round(sample_period_s * 1e9)), loop_ns, delay_ns)
-    return declaration(VoltageTiming("applied", off))
+    return applied_offset(int(round(sample_period_s * 1e9)), loop_ns, delay_ns)
+
+
+def kernel_declaration(params, sample_period_s: float) -> dict[str, str]:
+    """The metadata a writer of this project's kernel outputs (``applied``) declares for samples every
+    ``sample_period_s`` [s] from a tick, for the drive of ``params`` (:func:`kernel_applied_offset`)."""
+    return declaration(VoltageTiming("applied", kernel_applied_offset(params, sample_period_s)))
 
 
 def declaration(timing: VoltageTiming) -> dict[str, str]:

@@ -684,10 +684,7 @@ def applied_voltage_shift(ctx: Context, why: str, offset: float | None = None) -
     the sample instead, a free rotor's resistance comes out K² (T/2) / J LOW (this project's closed-loop recording,
     K 0.091 N·m/A, J 6e-5 kg·m², T 100 µs: -0.0069 Ω predicted, R 0.1624-0.1645 found for 0.17)."""
     if offset is None:
-        d = ctx.params.drive
-        loop_ns = int(round(1e9 / d.current_loop_rate))
-        offset = vt.applied_offset(int(round(1e9 / ctx.fs)), loop_ns,
-                                   min(int(round(d.current_loop_delay * 1e9)), loop_ns))
+        offset = vt.kernel_applied_offset(ctx.params, 1.0 / ctx.fs)
         how = "the voltage held over the loop period at the sample, nominal loop rate and computation delay"
     else:
         how = "as declared"
