@@ -41,8 +41,10 @@ PACKAGE = "bldc_actuator"
 
 # ROS domain ids used by tests: DOMAIN_ID_BASE..DOMAIN_ID_MAX (101 is the last id whose DDS ports stay
 # below the Linux ephemeral range). Under pytest-xdist each worker gets its own slice.
-DOMAIN_ID_BASE = 40
-DOMAIN_ID_MAX = 101
+# BLDC_TEST_DOMAIN_RANGE=LO-HI narrows them (two test runs on one machine, e.g. two checkouts, in disjoint ranges).
+DOMAIN_ID_BASE, DOMAIN_ID_MAX = (
+    int(x) for x in os.environ.get("BLDC_TEST_DOMAIN_RANGE", "40-101").split("-", 1)
+)
 _domain_counter = itertools.count()
 
 
