@@ -815,6 +815,10 @@ def _nuisance(ctx: Context) -> None:
                      f"{ctx.nuisance_reason}")
 
 
+#: [rad] the widest range a wrapping angle channel covers: one turn, and a little for a sensor's rounding
+WRAP_SPAN = 2 * math.pi * (1 + 1e-3)
+
+
 def _derive(ctx: Context) -> None:
     p = ctx.params
     m, raw, have, segs, t = p.motor, ctx.raw, ctx.have, ctx.segments, ctx.t
@@ -825,22 +829,35 @@ def _derive(ctx: Context) -> None:
     # angle and speed
     if "position" in have:
         th = raw["position"].copy()
+        wrapped_n, continuous_n, span_max = 0, 0, 0.0
         for a, b in segs:
             d = np.diff(th[a:b])
             jump = np.abs(d) > 0.9 * math.pi
-            step = None
-            if "velocity" in have and jump.any():   # a coarse log of fast motion moves > pi per sample: a wrap
-                v = raw["velocity"][a:b]            # is a jump the velocity channel does not explain
-                step = 0.5 * (v[1:] + v[:-1]) * np.diff(t[a:b])
-                jump &= ~(np.abs(d - step) <= 0.9 * math.pi)
-            if jump.any():   # wrapped angle
-                if step is None:
-                    th[a:b] = np.unwrap(th[a:b])
-                else:       # whole turns removed where the velocity says the angle did not go (np.unwrap would
-                    turns = np.where(np.isfinite(step), np.round((d - step) / (2 * math.pi)), 0.0)   # take < pi)
-                    th[a:b] = th[a] + np.concatenate([[0.0], np.cumsum(d - 2 * math.pi * turns)])
-                if "position was wrapped; unwrapped per segment" not in ctx.notes:
-                    ctx.notes.append("position was wrapped; unwrapped per segment")
+            if not jump.any():
+                continue
+            # whether the channel wraps is read from the channel itself: a wrapping angle stays within one turn
+            # ([0, 2 pi), [-pi, pi), ...); one that leaves it is continuous however far it moves per sample (a
+            # motor-side angle of a geared servo moves ~20 rad per sample on fast moves), whatever a lagging or
+            # filtered speed channel says (issue #24: 11-75 invented turns from the speed-consistency test)
+            span = float(np.ptp(th[a:b]))
+            if span > WRAP_SPAN:
+                continuous_n += int(jump.sum())
+                span_max = max(span_max, span)
+                continue
+            wrapped_n += int(jump.sum())
+            if "velocity" in have:   # a coarse log of fast wrapping motion moves > pi per sample: the turns
+                v = raw["velocity"][a:b]   # are removed where the velocity says the angle did not go (np.unwrap
+                step = 0.5 * (v[1:] + v[:-1]) * np.diff(t[a:b])   # would take the shorter way round)
+                turns = np.where(np.isfinite(step), np.round((d - step) / (2 * math.pi)), np.round(d / (2 * math.pi)))
+                th[a:b] = th[a] + np.concatenate([[0.0], np.cumsum(d - 2 * math.pi * turns)])
+            else:
+                th[a:b] = np.unwrap(th[a:b])
+        if wrapped_n:
+            ctx.notes.append(f"position was wrapped (it stays within one turn and jumps by more than 0.9 pi "
+                             f"{wrapped_n} time(s)): unwrapped per segment")
+        if continuous_n:
+            ctx.notes.append(f"position moves more than 0.9 pi in {continuous_n} sample(s) but spans up to "
+                             f"{span_max:.4g} rad (more than one turn): a continuous angle, taken as recorded")
         S["theta"] = th
         ctx.valid["theta"] = ctx.valid["position"]
     use_pos = "position" in have and not ctx.steady

@@ -425,8 +425,17 @@ def _unwrap_position(ctx: _Ctx, t, ch, segments) -> None:
             cand = cand[~(np.abs(d[cand] - expect[cand]) < 0.5 * np.abs(d[cand]))]
         if not len(cand):
             continue
-        step = float(np.median(np.delete(d, cand))) if len(d) > len(cand) else 0.0
-        mags = np.abs(d[cand] - step)           # the jump minus the ordinary step that happened with it
+        # the jump minus the ordinary step that happened with it: the mean of the neighbouring steps (the channel's
+        # own local motion; a wrapped angle moving ~1 rad per sample jumps by 2 pi - 1, not by 2 pi - the median)
+        ordinary = np.ones(len(d), bool)
+        ordinary[cand] = False
+        prev_i, next_i = np.clip(cand - 1, 0, len(d) - 1), np.clip(cand + 1, 0, len(d) - 1)
+        w_prev = ordinary[prev_i] & (cand > 0)
+        w_next = ordinary[next_i] & (cand < len(d) - 1)
+        cnt = w_prev.astype(float) + w_next
+        step = np.where(cnt > 0, (np.where(w_prev, d[prev_i], 0.0) + np.where(w_next, d[next_i], 0.0))
+                        / np.maximum(cnt, 1.0), 0.0)
+        mags = np.abs(d[cand] - step)
         P = float(np.median(mags))
         if np.all(np.abs(mags - P) < 0.05 * P) and (np.nanmax(seg) - np.nanmin(seg)) <= 1.1 * P:
             jumps_all.append((a, ok, cand, d))
