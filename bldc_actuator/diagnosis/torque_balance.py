@@ -67,6 +67,9 @@ class TorqueBalanceResult:
     held_out: dict
     not_checkable: list[dict] = field(default_factory=list)
     spectrum: dict | None = None      #: the angle-order peak: order ± sd, amplitude, x median, revolutions
+    ripple: dict | None = None        #: the angle-locked ripple in the measured torque (:func:`angle_locked_ripple`)
+    #: (angle, friction-only residual, the ripple's neighbour power) the ripple was measured on (for contrasts)
+    ripple_input: tuple | None = field(default=None, repr=False, compare=False)
 
     def to_dict(self) -> dict:
         def t(x: Term) -> dict:
@@ -76,7 +79,7 @@ class TorqueBalanceResult:
         return {"method": "torque balance (no motor current)", "angle_source": self.angle_source,
                 "r2": self.r2, "held_out": self.held_out, "findings": [t(x) for x in self.findings],
                 "rejected": [t(x) for x in self.rejected], "not_checkable": self.not_checkable,
-                "order_spectrum": self.spectrum, "notes": self.notes}
+                "order_spectrum": self.spectrum, "angle_locked_ripple": self.ripple, "notes": self.notes}
 
 
 # ----------------------------------------------------------------------------------------- signals
@@ -235,6 +238,147 @@ def _half_width(ks: np.ndarray, amps: np.ndarray, i: int) -> float:
     return max(0.5 * (edge(-1) + edge(1)), 0.5 * step)
 
 
+# ----------------------------------------------------------------------------------------- angle-locked ripple
+
+#: a ripple is reported when its order's power stands out of the neighbouring orders' at this false-alarm
+#: probability over all the orders searched (Bonferroni), and it is the same in both halves of the data
+RIPPLE_FALSE_ALARM = 1e-3
+#: the neighbouring orders a peak is compared with: within this many orders of it (at least 6 each side), the
+#: peak's own lobe (+-1.5 / revolutions covered, at least +-1 order) left out
+RIPPLE_NEIGHBOURS = 0.3
+
+
+def fit_order(theta: np.ndarray, r: np.ndarray, order: float) -> tuple[complex, float]:
+    """Least-squares ``a cos(k theta) + b sin(k theta)`` of ``r`` at ``order`` k: (a + i b, white-noise SD of a
+    and b from the fit's residual)."""
+    X = np.column_stack([np.cos(order * theta), np.sin(order * theta)])
+    coef, cov, _ = _lstsq(X, r)
+    return complex(coef[0], coef[1]), float(math.sqrt(max(0.5 * (cov[0, 0] + cov[1, 1]), 0.0)))
+
+
+def _neighbour_floor(ks: np.ndarray, amps: np.ndarray, i: int, lobe: float) -> tuple[float, int]:
+    """(mean squared amplitude, count) of the orders near ``ks[i]`` outside its lobe: the local noise level
+    there (the measured torque's unexplained part is rarely white: a powered motor's own torque wanders)."""
+    k = ks[i]
+    reach = max(6.0, RIPPLE_NEIGHBOURS * k)
+    d = np.abs(ks - k)
+    sel = (d > max(lobe, 1.0)) & (d <= reach + lobe)
+    if sel.sum() < 4:
+        return float("nan"), 0
+    return float(np.mean(np.square(amps[sel]))), int(sel.sum())
+
+
+def angle_locked_ripple(theta: np.ndarray, r: np.ndarray, omega: np.ndarray, revs: float, kmin: float,
+                        kmax: int, both_ways: bool) -> dict | None:
+    """The angle-locked ripple of ``r`` (the measured torque less what the balance explains, N*m at the output)
+    against the motor angle ``theta``: the order whose amplitude stands out most of its neighbouring orders
+    (power ratio F; p-value from F(2, 2m) with m neighbours, times the number of orders searched), its order
+    refined on a fine grid with the Cramer-Rao SD from the neighbours' noise level, its amplitude (least squares
+    at that order) with the SD max(neighbours' level, white-noise fit), and whether it is the same in both halves
+    of the data (angle-locked, not time-locked). None when no order can be searched."""
+    from scipy.stats import f as f_dist
+
+    if kmax <= kmin or len(r) < 50:
+        return None
+    ks, amps = order_scan(theta, r, kmin, kmax, revs)
+    lobe = 1.5 / max(revs, 1e-9)
+    ratios = np.full(len(ks), np.nan)
+    counts = np.zeros(len(ks), int)
+    for i in range(len(ks)):
+        fl, m = _neighbour_floor(ks, amps, i, lobe)
+        if m and fl > 0:
+            ratios[i], counts[i] = amps[i] ** 2 / fl, m
+    if not np.isfinite(ratios).any():
+        return None
+    i = int(np.nanargmax(ratios))
+    k0 = float(ks[i])
+    floor, m = _neighbour_floor(ks, amps, i, lobe)
+    F = float(ratios[i])
+    # on a grid finer than the resolution (< 4 revolutions: steps of 1/(4 R)) neighbouring amplitudes are not
+    # independent: the degrees of freedom and the number of orders searched count independent orders only
+    step = float(ks[1] - ks[0]) if len(ks) > 1 else 1.0
+    per_order = min(1.0, step * revs)
+    m_eff = max(2, int(round(m * per_order)))
+    n_search = max(1, int(round(len(ks) * per_order)))
+    p = float(min(1.0, f_dist.sf(F, 2, 2 * m_eff) * n_search))
+    # refine the order within the lobe on a fine grid
+    res = 0.443 / max(revs, 1e-9)
+    fine = np.linspace(k0 - res, k0 + res, 41)
+    fa = np.array([abs(fit_order(theta, r, k)[0]) for k in fine])
+    k_hat = float(fine[int(np.argmax(fa))])
+    z, sd_white = fit_order(theta, r, k_hat)
+    amp = abs(z)
+    sd_local = math.sqrt(floor / 2.0) if math.isfinite(floor) else float("nan")
+    amp_sd = max(sd_white, sd_local) if math.isfinite(sd_local) else sd_white
+    span = float(np.nanmax(theta) - np.nanmin(theta)) if both_ways else float(np.sum(np.abs(np.diff(theta))))
+    order_sd = min(res, math.sqrt(6.0) * amp_sd / max(amp * max(span, 1e-9), 1e-300))
+    consistent, why = _consistent(theta, r, int(round(k_hat)) if revs >= 4.0 else k_hat, omega, both_ways)
+    locked = bool(p < RIPPLE_FALSE_ALARM and consistent)
+    return {"order": k_hat, "order_sd": order_sd, "order_resolution": res, "amplitude": amp,
+            "amplitude_sd": amp_sd, "cos": z.real, "sin": z.imag, "phase": float(np.angle(z)),
+            "power_over_neighbours": F, "neighbours": m_eff, "neighbour_rms": math.sqrt(floor) if floor == floor else None,
+            "p_value": p, "orders_searched": n_search, "revolutions": revs, "consistency": why,
+            "consistent": bool(consistent), "angle_locked": locked}
+
+
+@dataclass
+class RippleContrast:
+    """The angle-locked ripple of several recordings (e.g. a compensation off and on) at one order."""
+
+    order: float                      #: the order compared [per motor revolution] (the strongest file's)
+    order_sd: float
+    amplitude: dict[str, float]       #: label -> amplitude at that order [N*m at the output]
+    amplitude_sd: dict[str, float]
+    significant: dict[str, bool]      #: label -> the ripple stands out of its neighbours in that file
+    difference: float                 #: first label's amplitude - the last's [N*m]
+    difference_sd: float
+    ratio: float                      #: last / first
+    message: str
+
+    def to_dict(self) -> dict:
+        return dict(self.__dict__)
+
+
+def ripple_contrast(recordings: dict, params, *, holdout: float = 0.3, order: float | None = None) -> RippleContrast:
+    """``recordings``: label -> cleaned Signals (torque and motion, e.g. {"off": ..., "on": ...}). Each is
+    diagnosed (:func:`diagnose`); the order is ``order`` [per motor revolution] when given, else the most
+    significant file's ripple order, and every file's
+    amplitude is fitted AT that order (even where it does not stand out, so the contrast has a number and an
+    SD on both sides). The message states the order, the amplitudes with SDs and the change."""
+    if len(recordings) < 2:
+        raise ValueError(f"ripple_contrast: recordings: expected two or more labelled recordings, got "
+                         f"{len(recordings)}")
+    runs = {lab: diagnose(sig, params, holdout=holdout) for lab, sig in recordings.items()}
+    with_r = {lab: r.ripple for lab, r in runs.items() if r.ripple is not None}
+    if not with_r:
+        raise ValueError("ripple_contrast: no recording covers enough angle to search an order")
+    if order is not None:
+        if not (math.isfinite(order) and order > 0):
+            raise ValueError(f"ripple_contrast: order: expected a positive number of periods per motor revolution, "
+                             f"got {order!r}")
+        order_sd = 0.0
+    else:
+        best = min(with_r, key=lambda lab: (with_r[lab]["p_value"], -with_r[lab]["power_over_neighbours"]))
+        order, order_sd = with_r[best]["order"], with_r[best]["order_sd"]
+    amp, sd, sig_ = {}, {}, {}
+    for lab, r in runs.items():
+        th, resid, floor = r.ripple_input
+        z, sd_white = fit_order(th, resid, order)
+        amp[lab] = abs(z)
+        sd[lab] = max(sd_white, math.sqrt(floor / 2.0)) if floor == floor else sd_white
+        sig_[lab] = bool(r.ripple and r.ripple["angle_locked"] and abs(r.ripple["order"] - order)
+                         <= 3 * math.hypot(r.ripple["order_sd"], order_sd) + 0.5)
+    labs = list(recordings)
+    a, b = labs[0], labs[-1]
+    diff, dsd = amp[a] - amp[b], math.hypot(sd[a], sd[b])
+    ratio = amp[b] / amp[a] if amp[a] > 0 else float("nan")
+    parts = ", ".join(f"{lab} {amp[lab]:.3g} ± {sd[lab]:.2g} N*m" + ("" if sig_[lab] else " (not above its "
+                                                                      "neighbouring orders)") for lab in labs)
+    msg = (f"angle-locked torque ripple at order {order:.3g} ± {order_sd:.2g} per motor revolution: {parts}; "
+           f"{a} - {b} = {diff:.3g} ± {dsd:.2g} N*m ({abs(diff) / max(dsd, 1e-300):.1f} sigma), {b}/{a} = {ratio:.2f}")
+    return RippleContrast(order, order_sd, amp, sd, sig_, diff, dsd, ratio, msg)
+
+
 # ----------------------------------------------------------------------------------------- diagnosis
 
 def diagnose(sig: Signals, params, *, holdout: float = 0.3, max_harmonics: int = 3) -> TorqueBalanceResult:
@@ -306,11 +450,19 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, max_harmonics: int =
     # width of its lobe, ~0.443/R), not refused for a short span; an order needs >= MIN_PERIODS periods in the span
     cog_terms = []
     spectrum = None
+    ripple = None
+    ripple_input = None
+    friction_keys = list(accepted_keys)
     kmin = max(1.0, MIN_PERIODS / max(revs, 1e-9))
     dth = float(np.median(np.abs(np.diff(th)))) or 1e-9 if n > 1 else 1e-9
     kmax = int(min(400, max(2, math.pi / dth / 2)))
     if kmax > kmin:
         _, _, r = fit(accepted_keys, np.ones(n, bool))
+        # the ripple locked to the angle in the MEASURED torque: decidable without the motor's own torque
+        ripple = angle_locked_ripple(th, r, om, revs, kmin, kmax, both_ways)
+        if ripple is not None:
+            nr = ripple["neighbour_rms"]
+            ripple_input = (th, r, nr ** 2 if nr is not None else float("nan"))
         ks, amps_k = order_scan(th, r, kmin, kmax, revs)
         i = int(np.argmax(amps_k))
         k_peak = float(ks[i])
@@ -403,11 +555,46 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, max_harmonics: int =
                      "canonical one (positive = the actuator drives in +); fix the sign in the input profile")
     offset = float(coef[idx["offset"]])
     notes.append(f"constant torque (sensor offset{'' if both_ways else ' + one-direction drag'}): {offset:.4g} N*m")
+    if ripple is not None:
+        _ripple_finding(ripple, cols, friction_keys, fit, heldout, n, th, out_f, out_r, notes)
     nom_rms = float(np.sqrt(np.mean((y[test] - nominal[test] - np.mean(y[train] - nominal[train])) ** 2)))
     final = heldout(accepted_keys)
     return TorqueBalanceResult(out_f, out_r, notes, how, r2,
                                {"metric": "torque_rms", "unit": "N*m", "nominal": nom_rms, "after": final},
-                               not_checkable, spectrum)
+                               not_checkable, spectrum, ripple, ripple_input)
+
+
+def _ripple_finding(rip, cols, keys, fit, heldout, n, th, out_f, out_r, notes) -> None:
+    """The angle-locked ripple as a finding of its own (the measured torque's, whoever makes it) unless the
+    balance already attributes it as the motor's cogging at that order; said in the notes either way."""
+    k = rip["order"]
+    txt = (f"angle-locked ripple in the measured torque: order {k:.4g} ± {rip['order_sd']:.2g} per motor revolution, "
+           f"{rip['amplitude']:.3g} ± {rip['amplitude_sd']:.2g} N*m at the output ({rip['power_over_neighbours']:.1f} x "
+           f"the power of its {rip['neighbours']} neighbouring orders, p = {rip['p_value']:.2g} over "
+           f"{rip['orders_searched']} orders; {rip['consistency']}), {rip['revolutions']:.2f} revolution(s)")
+    if not rip["angle_locked"]:
+        notes.append(txt.replace("angle-locked ripple in the measured torque", "no angle-locked ripple in the "
+                                 "measured torque: the strongest order") + ": not reported")
+        return
+    cog = [f for f in out_f if f.effect == "cogging_torque"
+           and abs(f.parameters.get("cogging_order", -1) - k) <= 3 * rip["order_sd"] + 0.5]
+    if cog:
+        notes.append(txt + ": attributed to the motor's cogging by the torque balance")
+        return
+    cols["ripple_c"], cols["ripple_s"] = np.cos(k * th), np.sin(k * th)
+    trial = keys + ["ripple_c", "ripple_s"]
+    every = np.ones(n, bool)
+    rss0, rss1 = (float(np.sum(fit(kk, every)[2] ** 2)) for kk in (keys, trial))
+    dbic = _bic(rss0, n, len(keys)) - _bic(rss1, n, len(trial))
+    ho = {"metric": "torque_rms", "unit": "N*m", "before": heldout(keys), "after": heldout(trial)}
+    par = {"order": k, "amplitude": rip["amplitude"], "cos": rip["cos"], "sin": rip["sin"]}
+    unc = {"order": rip["order_sd"], "amplitude": rip["amplitude_sd"], "cos": rip["amplitude_sd"],
+           "sin": rip["amplitude_sd"]}
+    un = {"order": "per motor revolution", "amplitude": "N*m", "cos": "N*m", "sin": "N*m"}
+    notes.append(txt + ": reported as a finding of the measured torque (cogging or torque ripple; without the "
+                       "motor current the motor's own share is not separated)")
+    out_f.append(Term("angle_locked_ripple", par, unc, un, ho, float(dbic), True,
+                      "angle-locked in the measured torque (decidable without the motor current)"))
 
 
 def updated_params(params, result: TorqueBalanceResult):

@@ -263,6 +263,12 @@ def torque_balance(signals, params, res, options, say: Say, t_start: float) -> D
             ev.append(f"angle-order peak at order {o['order']:.3g} ± {o['order_sd']:.2g} per motor revolution "
                       f"({o['amplitude']:.3g} N*m, {o['peak_over_median']:.1f} x the median) over "
                       f"{o['revolutions']:.2f} revolution(s)")
+        if x.effect == "angle_locked_ripple" and res.ripple:
+            o = res.ripple
+            ev.append(f"angle-locked ripple in the measured torque at order {o['order']:.3g} ± {o['order_sd']:.2g} per "
+                      f"motor revolution: {o['amplitude']:.3g} ± {o['amplitude_sd']:.2g} N*m at the output, "
+                      f"{o['power_over_neighbours']:.1f} x the power of its neighbouring orders (p = {o['p_value']:.2g}); "
+                      f"{o['consistency']}")
         findings.append({"effect": x.effect, "description": f"{x.effect.replace('_', ' ')} (torque balance)",
                          "form": "torque balance", "parameters": x.parameters, "uncertainty": x.uncertainty,
                          "units": x.units, "fields": {k: _TB_FIELDS[k] for k in x.parameters if k in _TB_FIELDS},
