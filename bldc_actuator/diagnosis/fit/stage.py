@@ -4,7 +4,8 @@
 ``Judgement.params_linear``), then the output-error refit — the accepted effects' simulator parameters and the
 core (K_t, J) fitted jointly by multiple shooting on the training windows, kept only when it simulates the
 held-out windows better (:func:`.output_error.refit`) — then the thermal, voltage-limit and drive-mode findings
-written into their fields, and the check whether several core values are far off (:func:`.base_model.check`).
+written into their fields, and the check whether several core values are far off (:func:`.base_model.check`: the
+verdict's headline only where the simulator confirms it, else a note).
 """
 
 from __future__ import annotations
@@ -56,7 +57,12 @@ def run(s: Search, j: Judgement, options, say: Say) -> Model:
         not_sim += tns
     # the written file re-simulates like the recorded drive: its current loop keeps the nominal motor values
     params = keep_controller_of(params, ctx.params)
-    base = base_model.check(ctx)   # several core values far off: say so before any effect
+    # several core values far off: said before any effect, where the simulator confirms it (else a note)
+    base = base_model.check(ctx, starts=s.starts_holdout, window_s=options.window_s,
+                            simulation_gate=bool(options.simulation_gate and options.replay), reference=params)
+    if base is not None and not base["headline"]:
+        notes.append(base["message"])
+        base = None
     dt = time.perf_counter() - t0
     say(f"5/6 refit: {len(j.final.keys)} fitted coefficient(s); not yet simulated: {not_sim or 'none'} "
         f"({dt + j.timing.get('judge', 0.0):.2f} s with the judges)")
