@@ -20,6 +20,12 @@ What this cannot do, and says: without current it cannot separate the motor's ow
 — when the balance explains little of the torque (R² < 0.5) the motor was probably powered and the
 findings are marked not identifiable; with motion in one direction only, Coulomb friction and a sensor
 offset are one column (reported as a drag, with the experiment that separates them).
+
+What it can decide all the same (issue #24): a ripple locked to the angle in the MEASURED torque
+(:func:`angle_locked_ripple`: the order standing out of its neighbouring orders, its amplitude and their
+uncertainties, the same in both directions or halves), reported as the finding ``angle_locked_ripple`` unless
+the balance attributes it as the motor's cogging; :func:`ripple_contrast` compares two or more recordings (a
+compensation off and on) at one order.
 """
 
 from __future__ import annotations
@@ -339,7 +345,8 @@ class RippleContrast:
         return dict(self.__dict__)
 
 
-def ripple_contrast(recordings: dict, params, *, holdout: float = 0.3, order: float | None = None) -> RippleContrast:
+def ripple_contrast(recordings: dict, params, *, holdout: float = 0.3,
+                    order: float | None = None) -> RippleContrast:
     """``recordings``: label -> cleaned Signals (torque and motion, e.g. {"off": ..., "on": ...}). Each is
     diagnosed (:func:`diagnose`); the order is ``order`` [per motor revolution] when given, else the most
     significant file's ripple order, and every file's
