@@ -111,3 +111,9 @@ def test_report_plots_never_use_offset_notation():
     for axis in (a.xaxis, a.yaxis):
         assert axis.get_major_formatter().get_offset() == ""
     plt.close(fig)
+
+
+def test_json_and_markdown_go_into_folders_that_do_not_exist_yet(tmp_path):
+    rep = _report([], decide([], []))
+    rep.write_json(tmp_path / "a" / "b" / "report.json")      # was FileNotFoundError (a traceback from the CLI)
+    assert json.loads((tmp_path / "a" / "b" / "report.json").read_text())["verdict_kind"] == NOTHING_MISSING

@@ -125,6 +125,7 @@ class DiagnosisReport:
         return _clean(d)
 
     def write_json(self, path: str | Path) -> None:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
         Path(path).write_text(json.dumps(self.to_dict(), indent=2, ensure_ascii=False) + "\n")
 
     def write_params(self, path: str | Path) -> None:
@@ -135,6 +136,7 @@ class DiagnosisReport:
                   f"Source: {self.setup.get('source', '')}\n")
         if self.not_simulated:
             header += f"Found but not simulated yet (no schema fields): {', '.join(self.not_simulated)}\n"
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
         dump_yaml(self.updated_params, path, header=header)
 
     # -- markdown + plots --------------------------------------------------------------------------
@@ -307,7 +309,7 @@ def _thin(n: int, m: int = 6000) -> np.ndarray:
 def _layout(fig) -> None:
     """Fixed margins (tight_layout costs a second per report)."""
     w, h = fig.get_size_inches()
-    fig.subplots_adjust(left=min(0.25, 0.9 / w), right=0.98, bottom=min(0.3, 0.55 / h), top=1 - min(0.2, 0.35 / h),
+    fig.subplots_adjust(left=min(0.25, 1.15 / w), right=0.98, bottom=min(0.3, 0.55 / h), top=1 - min(0.2, 0.35 / h),
                         wspace=0.35, hspace=0.35)
 
 
@@ -404,7 +406,7 @@ def _plot_jobs(r: DiagnosisReport, d: Path) -> list:
                 ax.axhline(0, color="k", lw=0.5)
             ax.set_xlabel(xlabel)
             ax.set_ylabel(f"{eq} residual [{B.unit.split(' ')[0]}]")
-            ax.legend(fontsize=7)
+            ax.legend(fontsize=7, markerscale=5)
         return fig
 
     if "omega_s" in ctx.sig:
