@@ -176,9 +176,9 @@ def run_example(ex: Example, tmp_path: Path) -> None:
         else:
             cmd = ["bash", "-c", _localize(step.command, out_dir)]
             shown = step.command
-        res = subprocess.run(cmd, cwd=REPO_ROOT, env=env, capture_output=True, text=True, timeout=900,
-                             stdin=subprocess.DEVNULL)
-        output = res.stdout + res.stderr
+        res = subprocess.run(cmd, cwd=REPO_ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                             text=True, timeout=900, stdin=subprocess.DEVNULL)   # one stream: the order printed
+        output = res.stdout
         assert res.returncode == 0, f"README example {ex.name!r}: `{shown}` exited {res.returncode}\n{output[-6000:]}"
         check_output([_localize(e, out_dir) for e in step.expected], output, ex.rtol, ex.atol)
 
