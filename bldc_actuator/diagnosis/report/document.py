@@ -406,7 +406,10 @@ def _plot_jobs(r: DiagnosisReport, d: Path) -> list:
                 ax.axhline(0, color="k", lw=0.5)
             ax.set_xlabel(xlabel)
             ax.set_ylabel(f"{eq} residual [{B.unit.split(' ')[0]}]")
-            ax.legend(fontsize=7, markerscale=5)
+            leg = ax.legend(fontsize=7)
+            for h in getattr(leg, "legend_handles", None) or getattr(leg, "legendHandles", []):
+                if hasattr(h, "set_markersize"):
+                    h.set_markersize(6)      # the 1.5-point data dots, legible in the legend
         return fig
 
     if "omega_s" in ctx.sig:
@@ -450,9 +453,12 @@ def _plot_jobs(r: DiagnosisReport, d: Path) -> list:
                 fig, ax = plt.subplots(figsize=(9, 3.2))
                 ax.semilogy(spec["orders"], np.maximum(spec["amplitude"], 1e-12), lw=0.8)
                 top = ax.get_ylim()[1]
+                o_max = max(spec["orders"])
                 for name, o in spec.get("marks", {}).items():
+                    if o > 1.05 * o_max:      # beyond the orders this recording resolves: no mark to read
+                        continue
                     ax.axvline(o, color="C3", ls="--", lw=0.8)
-                    ax.text(o, top, name, rotation=90, va="top", fontsize=7, color="C3")
+                    ax.text(o, top, f" {name}", rotation=90, va="top", ha="right", fontsize=8, color="C3")
                 for pk in spec.get("peaks", [])[:5]:
                     ax.plot(pk["order"], pk["amplitude"], "v", color="C1")
                 ax.set_xlabel("mechanical order [cycles / revolution]")
