@@ -130,7 +130,7 @@ def plot(result: SimResult, path: Path, title: str = "") -> None:
     import matplotlib.pyplot as plt
 
     t = result["t"]
-    fig, ax = plt.subplots(5, 1, figsize=(10, 12), sharex=False)
+    fig, ax = plt.subplots(5, 1, figsize=(11, 12), sharex=False)
     ax[0].plot(t, result["i_q_ref"], "k--", lw=1, label="i_q ref")
     ax[0].plot(t, result["i_q"], label="i_q")
     ax[0].plot(t, result["i_d"], label="i_d")
@@ -149,9 +149,10 @@ def plot(result: SimResult, path: Path, title: str = "") -> None:
     for key in ("i_phase_a", "i_phase_b", "i_phase_c"):
         ax[4].plot(t[-n:], result[key][-n:], label=key[-1].upper() if key != "i_phase_a" else "A")
     ax[4].set_ylabel("phase current [A]\n(at the output rate)")
-    for a in ax:
-        a.legend(loc="upper right", fontsize=8)
+    for a in ax:   # beside the panel: inside it the legend hid the curves it names
+        a.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, borderaxespad=0.0)
         a.grid(alpha=0.3)
+        a.ticklabel_format(useOffset=False)
     ax[-1].set_xlabel("time [s]")
     ax[-2].set_xlabel("time [s]")
     fig.suptitle(title)

@@ -140,7 +140,7 @@ def test_not_checkable_in_simulation_is_marked_in_every_output(tmp_path, capsys)
          "simulation": {"verdict": "not checkable in simulation"}, "not_checkable_in_simulation": True}
     rec = decide(["thermal_parameters"], [], not_checkable_in_simulation=["thermal_parameters"])
     rep = DiagnosisReport(channels=[], findings=[f], rejected=[], windows=[], data_issues=[], not_checkable=[],
-                          aliases=[], verdict=rec.text(), verdict_record=rec)
+                          aliases=[], verdict_record=rec)
     rep.write_json(tmp_path / "r.json")
     rep.write_markdown(tmp_path / "md", plots=False)
 

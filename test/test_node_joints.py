@@ -185,4 +185,6 @@ def test_one_recording_diagnoses_per_joint(ros_context, ros_executor, tmp_path):
                      "--quiet"]) == 0
     report = json.loads(out.read_text())
     # the knee's own stored parameters are the truth of that joint: nothing is missing
-    assert report["nothing_missing"] is True and not report["findings"]
+    # (a short run: "not decidable: held-out too short" or "nothing missing"; never a finding)
+    assert not report["findings"] and report["verdict_kind"] in ("nothing missing", "not decidable")
+    assert report["nothing_missing"] is (report["verdict_kind"] == "nothing missing")

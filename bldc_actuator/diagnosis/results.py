@@ -69,11 +69,17 @@ class Verdict:
             body += f"; {self.suffix}"
         return f"{self.prefix}; {body}" if self.prefix else body
 
+    @property
+    def nothing_missing(self) -> bool:
+        """True only for the kind "nothing missing" (not for a "not decidable" verdict without findings)."""
+        return self.kind == NOTHING_MISSING
+
     def remedies(self) -> list[str]:
         return [u.remedy for u in self.undecidable if u.remedy]
 
     def to_dict(self) -> dict:
-        return {"kind": self.kind, "text": self.text(), "found": list(self.found),
+        return {"kind": self.kind, "text": self.text(), "nothing_missing": self.nothing_missing,
+                "found": list(self.found),
                 "not_checkable_in_simulation": list(self.not_checkable_in_simulation),
                 "reasons": [u.to_dict() for u in self.undecidable]}
 

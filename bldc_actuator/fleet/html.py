@@ -20,7 +20,7 @@ KIND_LABEL = {"off_nominal": "off nominal", "drifting": "drifting", "shifted": "
 
 def _png(fig) -> str:
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=80)
+    fig.savefig(buf, format="png", dpi=96)
     return base64.b64encode(buf.getvalue()).decode("ascii")
 
 
@@ -49,7 +49,7 @@ def actuator_figure(aid: str, rows: list[dict], series: dict[str, dict]):
     params = sorted({r["parameter"] for r in rows})
     ncol = min(3, len(params))
     nrow = int(math.ceil(len(params) / ncol))
-    fig, axes = plt.subplots(nrow, ncol, figsize=(3.4 * ncol, 2.3 * nrow + 0.5), squeeze=False)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(4.2 * ncol, 3.0 * nrow + 0.6), squeeze=False)
     for ax in axes.flat[len(params):]:
         ax.set_visible(False)
     for ax, par in zip(axes.flat, params):
@@ -83,17 +83,18 @@ def actuator_figure(aid: str, rows: list[dict], series: dict[str, dict]):
         title = par.replace("_", " ")
         if alert:
             title = "ALERT " + ", ".join(KIND_LABEL.get(k, k) for k in rec.get("kinds", [])) + "\n" + title
-        ax.set_title(title, fontsize=8, color="tab:red" if alert else "black")
-        ax.set_ylabel(unit, fontsize=7)
-        ax.tick_params(labelsize=6)
+        ax.set_title(title, fontsize=10, color="tab:red" if alert else "black")
+        ax.set_ylabel(unit, fontsize=9)
+        ax.tick_params(labelsize=8)
+        ax.ticklabel_format(axis="y", useOffset=False)
         ax.grid(alpha=0.3)
         for lab in ax.get_xticklabels():
             lab.set_rotation(30)
             lab.set_ha("right")
     first = axes.flat[0]
     if first.get_legend_handles_labels()[0]:
-        first.legend(fontsize=6, loc="best")
-    fig.suptitle(aid, fontsize=10)
+        first.legend(fontsize=8, loc="best")
+    fig.suptitle(aid, fontsize=12)
     fig.tight_layout()
     return fig
 
@@ -134,7 +135,7 @@ def _alert_rows(alerts: list[dict]) -> list[str]:
             f"<td>{_fmt(l_['value'])} ± {_fmt(l_['sd'], 2)}<br><small>{e(l_['start_time'][:16])}</small></td>"
             f"<td>{_fmt(a['reference'])} ({e(a['reference_kind'])})</td>"
             f"<td>{_fmt(a.get('rate_per_day'), 3)} ± {_fmt(a.get('rate_se_per_day'), 2)}</td>"
-            f"<td>{lim_s}</td><td><small>{recs}</small></td><td><small>{e(a['message'])}</small></td></tr>")
+            f"<td>{lim_s}</td><td class='recs'><small>{recs}</small></td><td><small>{e(a['message'])}</small></td></tr>")
     out.append("</table>")
     return out
 
@@ -155,7 +156,7 @@ def write(path, rows: list[dict], ev: dict[str, Any], failures: list[dict], summ
     out = ["<!DOCTYPE html><html><head><meta charset='utf-8'><title>Fleet diagnosis</title>",
            "<style>body{font-family:sans-serif;margin:1.5em;max-width:80em}table{border-collapse:collapse;"
            "font-size:0.85em}td,th{border:1px solid #ccc;padding:2px 6px;vertical-align:top}.alert{color:#b00}"
-           ".ok{color:#070}</style></head><body>",
+           ".ok{color:#070}td.recs{white-space:nowrap}img{max-width:100%}</style></head><body>",
            "<h1>Fleet diagnosis</h1>",
            f"<h2 class='{'alert' if alerts else 'ok'}'>Alerts: {len(alerts)}</h2>"]
     out += _alert_rows(alerts) if alerts else ["<p class='ok'>No actuator needs attention.</p>"]

@@ -55,7 +55,6 @@ class DiagnosisReport:
     data_issues: list[dict]
     not_checkable: list[dict]
     aliases: list[dict]
-    verdict: str = ""
     notes: list[str] = field(default_factory=list)
     compare: dict = field(default_factory=dict)
     locate: dict = field(default_factory=dict)
@@ -66,7 +65,7 @@ class DiagnosisReport:
     setup: dict = field(default_factory=dict)
     updated_params: ActuatorParams | None = None
     nominal_params: ActuatorParams | None = None
-    verdict_record: Verdict | None = None     #: the verdict's kind and reasons (:mod:`.results`)
+    verdict_record: Verdict | None = None     #: THE verdict (:mod:`.results`): every output derives from it
     residual_structure: list = field(default_factory=list)   #: what is left after the findings, where it sits
     method: str = "equation error + simulation"
     _internals: dict = field(default_factory=dict, repr=False)
@@ -74,13 +73,21 @@ class DiagnosisReport:
     def __post_init__(self):
         if self.verdict_record is None:
             self.verdict_record = decide([f["effect"] for f in self.findings], [])
-        if not self.verdict:
-            self.verdict = self.verdict_record.text()
+        missing = [f["effect"] for f in self.findings if f["effect"] not in self.verdict_record.found]
+        if missing:
+            raise ValueError(f"DiagnosisReport.verdict_record: the findings {', '.join(missing)} are not in the "
+                             f"verdict ({self.verdict_record.text()!r}); build it with results.decide(findings, ...)")
+
+    # the verdict's every face is read from the one record (issue #24 symptom 10): never stored beside it
+    @property
+    def verdict(self) -> str:
+        """The one verdict line (stdout, report.md and the JSON's ``verdict``)."""
+        return self.verdict_record.text()
 
     @property
     def nothing_missing(self) -> bool:
-        """No finding (the verdict's kind says whether that is "nothing missing" or "not decidable")."""
-        return not self.findings
+        """True only for the verdict "nothing missing" (a "not decidable" report without findings is False)."""
+        return self.verdict_record.nothing_missing
 
     @property
     def verdict_kind(self) -> str:
@@ -106,9 +113,9 @@ class DiagnosisReport:
                                        "median": spec.get("median"), "method": spec.get("method")}
             L.pop("rolling_rms", None)
             loc[eq] = L
-        d = {"verdict": self.verdict, "verdict_kind": self.verdict_kind,
-             "verdict_reasons": [u.to_dict() for u in self.verdict_record.undecidable],
-             "nothing_missing": self.nothing_missing, "method": self.method, "channels": self.channels,
+        v = self.verdict_record.to_dict()
+        d = {"verdict": v["text"], "verdict_kind": v["kind"], "verdict_reasons": v["reasons"],
+             "nothing_missing": v["nothing_missing"], "verdict_record": v, "method": self.method, "channels": self.channels,
              "findings": self.findings, "rejected": self.rejected, "windows": self.windows,
              "data_issues": self.data_issues, "not_checkable": self.not_checkable, "aliases": self.aliases,
              "not_simulated": self.not_simulated, "compare": self.compare, "locate": loc,
@@ -118,6 +125,7 @@ class DiagnosisReport:
         return _clean(d)
 
     def write_json(self, path: str | Path) -> None:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
         Path(path).write_text(json.dumps(self.to_dict(), indent=2, ensure_ascii=False) + "\n")
 
     def write_params(self, path: str | Path) -> None:
@@ -128,6 +136,7 @@ class DiagnosisReport:
                   f"Source: {self.setup.get('source', '')}\n")
         if self.not_simulated:
             header += f"Found but not simulated yet (no schema fields): {', '.join(self.not_simulated)}\n"
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
         dump_yaml(self.updated_params, path, header=header)
 
     # -- markdown + plots --------------------------------------------------------------------------
@@ -220,7 +229,7 @@ def _markdown(r: DiagnosisReport, images: dict[str, str]) -> str:
     if r.not_checkable:
         L += ["## Not checkable with this recording", ""]
         for x in r.not_checkable:
-            L.append(f"- **{x['effect']}**: not checkable: {x['reason']}")
+            L.append(f"- **{x['effect']}**: {x['reason']}")   # the heading says "not checkable" once
         L.append("")
     c = r.compare or {}
     tb = c.get("torque_balance")
@@ -300,7 +309,7 @@ def _thin(n: int, m: int = 6000) -> np.ndarray:
 def _layout(fig) -> None:
     """Fixed margins (tight_layout costs a second per report)."""
     w, h = fig.get_size_inches()
-    fig.subplots_adjust(left=min(0.25, 0.9 / w), right=0.98, bottom=min(0.3, 0.55 / h), top=1 - min(0.2, 0.35 / h),
+    fig.subplots_adjust(left=min(0.25, 1.15 / w), right=0.98, bottom=min(0.3, 0.55 / h), top=1 - min(0.2, 0.35 / h),
                         wspace=0.35, hspace=0.35)
 
 
@@ -397,7 +406,10 @@ def _plot_jobs(r: DiagnosisReport, d: Path) -> list:
                 ax.axhline(0, color="k", lw=0.5)
             ax.set_xlabel(xlabel)
             ax.set_ylabel(f"{eq} residual [{B.unit.split(' ')[0]}]")
-            ax.legend(fontsize=7)
+            leg = ax.legend(fontsize=7)
+            for h in getattr(leg, "legend_handles", None) or getattr(leg, "legendHandles", []):
+                if hasattr(h, "set_markersize"):
+                    h.set_markersize(6)      # the 1.5-point data dots, legible in the legend
         return fig
 
     if "omega_s" in ctx.sig:
@@ -441,9 +453,12 @@ def _plot_jobs(r: DiagnosisReport, d: Path) -> list:
                 fig, ax = plt.subplots(figsize=(9, 3.2))
                 ax.semilogy(spec["orders"], np.maximum(spec["amplitude"], 1e-12), lw=0.8)
                 top = ax.get_ylim()[1]
+                o_max = max(spec["orders"])
                 for name, o in spec.get("marks", {}).items():
+                    if o > 1.05 * o_max:      # beyond the orders this recording resolves: no mark to read
+                        continue
                     ax.axvline(o, color="C3", ls="--", lw=0.8)
-                    ax.text(o, top, name, rotation=90, va="top", fontsize=7, color="C3")
+                    ax.text(o, top, f" {name}", rotation=90, va="top", ha="right", fontsize=8, color="C3")
                 for pk in spec.get("peaks", [])[:5]:
                     ax.plot(pk["order"], pk["amplitude"], "v", color="C1")
                 ax.set_xlabel("mechanical order [cycles / revolution]")
@@ -463,19 +478,21 @@ def _plot_jobs(r: DiagnosisReport, d: Path) -> list:
         def before_after():
             tb, ta = rp["before"]["trace"], rp["after"]["trace"]   # held-out windows spread over the recording
             nwin = max(1, len(tb["t"]))
-            fig, axes = plt.subplots(2, nwin, figsize=(3.2 * nwin, 5), squeeze=False)
+            fig, axes = plt.subplots(2, nwin, figsize=(max(6.0, 2.6 * nwin), 5), squeeze=False)
             for j in range(len(tb["t"])):
-                tt = np.array(tb["t"][j])
+                tt = np.array(tb["t"][j], dtype=float)
+                t0 = float(tt[0]) if len(tt) else 0.0
+                dt_ms = 1e3 * (tt - t0)          # a 0.1 s window at t = 227 s: offset notation otherwise
                 ax = axes[0, j]
-                ax.plot(tt, tb["meas_velocity"][j], color="k", lw=1, label="measured")
-                ax.plot(tt, tb["sim_velocity"][j], color="0.6", lw=1, label="nominal sim")
-                ax.plot(tt, ta["sim_velocity"][j], color="C0", lw=1, label="updated sim")
-                ax.set_title(f"held-out window {j + 1}", fontsize=8)
+                ax.plot(dt_ms, tb["meas_velocity"][j], color="k", lw=1, label="measured")
+                ax.plot(dt_ms, tb["sim_velocity"][j], color="0.6", lw=1, label="nominal sim")
+                ax.plot(dt_ms, ta["sim_velocity"][j], color="C0", lw=1, label="updated sim")
+                ax.set_title(f"window {j + 1}: t0 = {t0:.4g} s", fontsize=8)
                 ax = axes[1, j]
-                ax.plot(tt, tb["meas_current"][j], color="k", lw=1)
-                ax.plot(tt, tb["sim_current"][j], color="0.6", lw=1)
-                ax.plot(tt, ta["sim_current"][j], color="C0", lw=1)
-                ax.set_xlabel("t [s]")
+                ax.plot(dt_ms, tb["meas_current"][j], color="k", lw=1)
+                ax.plot(dt_ms, tb["sim_current"][j], color="0.6", lw=1)
+                ax.plot(dt_ms, ta["sim_current"][j], color="C0", lw=1)
+                ax.set_xlabel("t − t0 [ms]")
             axes[0, 0].set_ylabel("speed [rad/s]")
             axes[1, 0].set_ylabel("q current [A]")
             axes[0, 0].legend(fontsize=7)
@@ -498,9 +515,19 @@ def _plot_jobs(r: DiagnosisReport, d: Path) -> list:
     return jobs
 
 
+def plain_tick_labels(fig) -> None:
+    """Tick labels a person reads: no offset notation (``1e-6−2.2734075e2``) on any linear axis; the data is
+    plotted in units or relative to a stated origin where the numbers would be long."""
+    for ax in fig.axes:
+        for axis in ("x", "y"):
+            if getattr(ax, f"get_{axis}scale")() == "linear":
+                ax.ticklabel_format(axis=axis, useOffset=False)
+
+
 def _save(fig, d: Path, name: str, title: str):
     import matplotlib.pyplot as plt
 
+    plain_tick_labels(fig)
     _layout(fig)
     fig.savefig(d / name, dpi=80)
     plt.close(fig)

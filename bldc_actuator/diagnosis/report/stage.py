@@ -30,7 +30,7 @@ def not_checkable(s: Search) -> DiagnosisReport:
                            data_issues=s.data_issues,
                            not_checkable=[{"effect": n, "reason": "needs current and velocity or position",
                                            "needs": ["current", "velocity|position"]} for n in s.names],
-                           aliases=[], verdict=rec.text(), verdict_record=rec, notes=s.ctx.notes)
+                           aliases=[], verdict_record=rec, notes=s.ctx.notes)
 
 
 def _data_notes(signals) -> list[str]:
@@ -228,7 +228,7 @@ def run(signals, params, s: Search, j: Judgement, m: Model, options, say: Say, t
     report = DiagnosisReport(
         channels=sorted(ctx.have), findings=findings, windows=s.windows, rejected=rejected,
         data_issues=s.data_issues, not_checkable=not_checkable,
-        aliases=_aliases(sel, lib), verdict=verdict, verdict_record=verdict_rec,
+        aliases=_aliases(sel, lib), verdict_record=verdict_rec,
         residual_structure=[x.to_dict() for x in structures],
         notes=_data_notes(signals) + ctx.notes + m.notes + ([base["message"]] if base else []), compare=compare,
         locate=s.located,
@@ -303,7 +303,7 @@ def torque_balance(signals, params, res, options, say: Say, t_start: float) -> D
     return DiagnosisReport(
         channels=sorted(c for c, v in signals.channels.items() if np.isfinite(v).any()), findings=findings,
         rejected=rejected, windows=[], data_issues=issues, not_checkable=list(res.not_checkable), aliases=[],
-        verdict=verdict, verdict_record=rec, notes=_data_notes(signals) + list(res.notes), compare=compare,
+        verdict_record=rec, notes=_data_notes(signals) + list(res.notes), compare=compare,
         updated_params=tb_mod.updated_params(params, res), nominal_params=params, timing=timing,
         method="torque balance (no motor current)",
         setup={"rate_hz": rate, "samples": int(len(signals.time)), "holdout": f"{options.holdout:g} of the samples "
