@@ -636,6 +636,44 @@ class Actuator(_Base):
         return (theta / c.N, omega / c.N, _torque_constant_q(c, i_q, T_h) * i_q * c.N,
                 _voltage_saturated(c, abs(v)))
 
+    def trace_ns(self, dt_ns: int, *, include_start: bool = False) -> np.ndarray:
+        """Advance ``dt_ns`` [ns] as :meth:`step_ns` does and return the kernel's state (:data:`kernel.STATE_DTYPE`,
+        one record per tick) at every current-loop tick instant passed (``t_ns`` a multiple of the loop period,
+        after the start, up to and including the end): the kernel's own resolution, whatever the caller's steps.
+        ``include_start``: the state now first (wherever it is). :meth:`tick_signals` turns them into signals."""
+        dt_ns = int(dt_ns)
+        tick = int(self._c.tick_ns)
+        t = self.t_ns
+        end = t + dt_ns
+        first = (t // tick + 1) * tick
+        n = (end - first) // tick + 1 if first <= end else 0
+        j = int(include_start)
+        out = np.empty(n + j, STATE_DTYPE)
+        names = STATE_DTYPE.names
+        for k in range(-j, n):
+            b = first + k * tick if k >= 0 else t
+            self.step_ns(b - t)
+            t = b
+            out[k + j] = self._ss[0] if self._rs is None else tuple(getattr(self._rs[0], f) for f in names)
+        if t < end:
+            self.step_ns(end - t)
+        return out
+
+    def tick_signals(self, states: np.ndarray) -> dict[str, np.ndarray]:
+        """Signals of kernel states (:meth:`trace_ns`) by the formulas of :meth:`outputs`: ``t`` [s], ``i_d``,
+        ``i_q`` [A], ``v_magnitude_q`` [V] (the voltage held up to the instant), ``voltage_saturated``,
+        ``velocity_out`` [rad/s] (what the encoder reports: the load behind a compliant transmission with
+        ``gear.encoder_side: load``), ``T_winding``, ``T_housing`` [degC]."""
+        c = self._c
+        v_mag = np.abs(states["v"])
+        if c.enc_load and c.compliant:
+            velocity_out = states["omega_l"].copy()
+        else:
+            velocity_out = states["omega"] / c.N
+        return {"t": states["t_ns"] * 1e-9, "i_d": states["i"].real.copy(), "i_q": states["i"].imag.copy(),
+                "v_magnitude_q": v_mag, "voltage_saturated": _voltage_saturated(c, v_mag),
+                "velocity_out": velocity_out, "T_winding": states["T_w"].copy(), "T_housing": states["T_h"].copy()}
+
     def run(self, profile, *, record_every: float | None = None) -> "SimResult":
         """Run a command profile (see :mod:`bldc_actuator.profiles`) and return every signal."""
         from .profiles import run_profile

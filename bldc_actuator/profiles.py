@@ -17,12 +17,40 @@ import numpy as np
 KINDS = ("current", "torque")
 
 
+@dataclass(frozen=True)
+class RunSummary:
+    """A run's figures at the kernel's resolution: every current-loop tick (and the start), whatever the rate the
+    signals were sampled at (a peak between two output samples is a peak)."""
+
+    duration: float                     #: [s]
+    ticks: int                          #: current-loop ticks the figures cover
+    peak_abs_i_q: float                 #: max |i_q| [A]
+    peak_abs_i_d: float                 #: max |i_d| [A]
+    peak_abs_velocity_out: float        #: max |velocity_out| [rad/s, output side]
+    saturated_fraction: float           #: fraction of the ticks whose held voltage is on the inverter's circle
+    T_winding_start: float              #: [degC]
+    T_winding_end: float                #: [degC]
+    T_winding_peak: float               #: [degC]
+
+    @classmethod
+    def from_signals(cls, sig: dict[str, np.ndarray]) -> "RunSummary":
+        """From :meth:`~bldc_actuator.model.Actuator.tick_signals` of the run's tick states (the start first)."""
+        t = sig["t"]
+        return cls(duration=float(t[-1] - t[0]), ticks=len(t) - 1,
+                   peak_abs_i_q=float(np.max(np.abs(sig["i_q"]))), peak_abs_i_d=float(np.max(np.abs(sig["i_d"]))),
+                   peak_abs_velocity_out=float(np.max(np.abs(sig["velocity_out"]))),
+                   saturated_fraction=float(np.mean(sig["voltage_saturated"][1:])) if len(t) > 1 else 0.0,
+                   T_winding_start=float(sig["T_winding"][0]), T_winding_end=float(sig["T_winding"][-1]),
+                   T_winding_peak=float(np.max(sig["T_winding"])))
+
+
 @dataclass
 class SimResult:
     """Signals sampled over a run: each field an array over sample times (see :func:`Actuator.outputs`)."""
 
     signals: dict[str, np.ndarray]
     params: object                      #: the :class:`~bldc_actuator.params.ActuatorParams` of the run
+    summary: RunSummary | None = None   #: the run's figures at every current-loop tick (:func:`run_profile`)
 
     def __getitem__(self, key: str) -> np.ndarray:
         return self.signals[key]
@@ -134,8 +162,9 @@ def from_csv(path: str | Path) -> Profile:
 
 #: signals recorded by :func:`run_profile` (all of :func:`Actuator.outputs` that are numbers)
 def run_profile(actuator, profile: Profile, *, record_every: float | None = None):
-    """Drive ``actuator`` with ``profile``; record outputs at every profile sample (or every
-    ``record_every`` seconds). Returns a :class:`SimResult`."""
+    """Drive ``actuator`` (an :class:`~bldc_actuator.model.Actuator`) with ``profile``; record outputs at every
+    profile sample (or every ``record_every`` seconds). Returns a :class:`SimResult` whose ``summary`` covers every
+    current-loop tick (:class:`RunSummary`), not only the recorded samples."""
 
     setter = actuator.set_current_command if profile.kind == "current" else actuator.set_torque_command
     t_ns = np.round(profile.t * 1e9).astype(np.int64)
@@ -149,10 +178,11 @@ def run_profile(actuator, profile: Profile, *, record_every: float | None = None
     is_rec = np.isin(events, rec_ns)
     rows: list[dict] = []
     load = profile.load_torque
+    ticks = [actuator.trace_ns(0, include_start=True)]     # the summary's states: the start and every tick
     for k, (ev, ci, rec) in enumerate(zip(events, cmd_idx, is_rec)):
         target = start + int(ev - t_ns[0])
         if target > actuator.t_ns:
-            actuator.step_ns(target - actuator.t_ns)
+            ticks.append(actuator.trace_ns(target - actuator.t_ns))
         if rec:
             rows.append(actuator.outputs())
         setter(float(profile.values[ci]))
@@ -161,4 +191,5 @@ def run_profile(actuator, profile: Profile, *, record_every: float | None = None
     keys = [k for k, v in rows[0].items() if isinstance(v, (int, float, bool, np.bool_))]
     signals = {k: np.array([r[k] for r in rows], dtype=float) for k in keys}
     signals["command"] = profile.values[np.searchsorted(t_ns, rec_ns, side="right") - 1]
-    return SimResult(signals, actuator.params)
+    summary = RunSummary.from_signals(actuator.tick_signals(np.concatenate(ticks)))
+    return SimResult(signals, actuator.params, summary)

@@ -162,12 +162,15 @@ def plot(result: SimResult, path: Path, title: str = "") -> None:
 
 
 def summary(result: SimResult) -> str:
-    sat = float(np.mean(result["voltage_saturated"])) * 100
-    return (f"duration {result['t'][-1]:.3f} s, samples {len(result['t'])}\n"
-            f"peak |i_q| {np.max(np.abs(result['i_q'])):.3f} A, peak output speed "
-            f"{np.max(np.abs(result['velocity_out'])):.3f} rad/s, voltage saturated {sat:.1f} % of samples\n"
-            f"winding temperature {result['T_winding'][0]:.2f} -> {result['T_winding'][-1]:.2f} degC "
-            f"(peak {np.max(result['T_winding']):.2f})")
+    """The run's figures, from the simulation at every current-loop tick (:class:`profiles.RunSummary`), not from
+    the trace sampled at ``--rate`` (whose peak between samples depends on the rate)."""
+    s = result.summary
+    return (f"duration {s.duration:.3f} s, samples {len(result['t'])} at the output rate, current-loop ticks "
+            f"{s.ticks} (the figures below cover every tick)\n"
+            f"peak |i_q| {s.peak_abs_i_q:.3f} A, peak output speed {s.peak_abs_velocity_out:.3f} rad/s, "
+            f"voltage saturated {100 * s.saturated_fraction:.1f} % of ticks\n"
+            f"winding temperature {s.T_winding_start:.2f} -> {s.T_winding_end:.2f} degC "
+            f"(peak {s.T_winding_peak:.2f})")
 
 
 def run(args) -> int:

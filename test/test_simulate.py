@@ -93,3 +93,30 @@ def test_simulate_csv_writes_at_the_output_rate_not_at_the_input_rows(tmp_path, 
     # --rate sets the output rate of a csv profile too
     _, c = _simulate_csv(tmp_path, "slow", short, "--rate", "200")
     assert len(c) == 201 and np.max(np.abs(c[:, i_q])) == pytest.approx(peak_dense, rel=0.05)
+
+
+def _summary_lines(out):
+    return [line for line in out.splitlines() if line.startswith(("peak |i_q|", "winding temperature"))]
+
+
+def test_simulate_summary_is_the_simulations_not_the_output_rates(tmp_path, capsys):
+    """Issue #25: the printed peak |i_q| was the peak of the trace sampled at --rate (5.00 / 5.87 / 7.57 A at 100 /
+    1000 / 10000 Hz for one run: a +5 A run-up to the voltage limit, then -5 A at 228 rad/s, whose overshoot lasts a
+    few ticks). The summary covers every current-loop tick: the same figures at every rate, the overshoot's peak."""
+    rows = [(0.0, 0.0), (0.05, 5.0), (0.6, -5.0), (0.8, -5.0)]
+    lines = {}
+    for rate in ("100", "1000", "10000"):
+        _simulate_csv(tmp_path, f"rev{rate}", rows, "--rate", rate)
+        lines[rate] = _summary_lines(capsys.readouterr().out)
+    assert len(lines["100"]) == 2
+    assert lines["100"] == lines["1000"] == lines["10000"]
+    peak = float(lines["100"][0].split()[2])
+    assert peak > 7.0                   # the reversal's overshoot (test_simulate_reversal.py), seen at any rate
+    # the Python API says the same (SimResult.summary)
+    from bldc_actuator.simulate import simulate_profile
+
+    prof = profiles.Profile([r[0] for r in rows], [r[1] for r in rows])
+    a, b = simulate_profile("ak80_9", prof, rate=100.0), simulate_profile("ak80_9", prof, rate=3000.0)
+    assert a.summary.peak_abs_i_q == pytest.approx(b.summary.peak_abs_i_q, rel=1e-9) == pytest.approx(peak, abs=1e-3)
+    assert a.summary.ticks == b.summary.ticks == 8000
+    assert np.max(np.abs(a["i_q"])) < 5.01 < a.summary.peak_abs_i_q      # the 100 Hz trace misses the overshoot
