@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -124,22 +125,67 @@ def chirp(amplitude: float, f0: float, f1: float, duration: float = 2.0, rate: f
                    name=f"chirp {f0:g}-{f1:g} Hz")
 
 
-def from_csv(path: str | Path) -> Profile:
-    """CSV with a header: ``time`` [s] and ``current_command`` [A] or ``torque_command`` [N·m],
-    optional ``load_torque`` [N·m]. Errors name the line."""
+#: time units a command CSV may be in -> seconds per unit
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+#: a time column's name: ``time`` (seconds, checked), or ``time``/``t`` with its unit (``time_ms``, ``t [ms]``)
+_TIME_COLUMN = re.compile(r"^(?:time|t)(?:_(s|ms|us|ns)|\s*\[\s*(s|ms|us|µs|ns)\s*\])$|^time$")
+#: a unit-less ``time`` column is taken for milliseconds (an error) when it has at least this many rows spaced
+#: >= 1 s (as seconds a table of commands at <= 1 Hz, as milliseconds an ordinary log at <= 1 kHz), or when it
+#: lasts at least this long in whole numbers
+SUSPECT_MS_ROWS = 20
+SUSPECT_MS_DURATION_S = 60.0
+
+
+def _time_column(header: list[str]) -> tuple[int, str | None]:
+    """(index, unit named in the header or None) of the time column; ValueError when there is none."""
+    for k, name in enumerate(header):
+        m = _TIME_COLUMN.match(name)
+        if m:
+            unit = m.group(1) or m.group(2)
+            return k, (None if unit is None else unit.replace("µ", "u"))
+    raise ValueError("header needs a 'time' column [s] (or one naming its unit: time_s, time_ms, t_ms, "
+                     f"'time [ms]', time_us, time_ns), got {header}")
+
+
+def looks_like_milliseconds(t: np.ndarray) -> bool:
+    """Whether a time column read as seconds looks like milliseconds (see :data:`SUSPECT_MS_ROWS`)."""
+    t = np.asarray(t, float)
+    if len(t) < 2:
+        return False
+    dt = np.diff(t)
+    dense_slow = len(t) >= SUSPECT_MS_ROWS and float(np.median(dt)) >= 1.0
+    long_whole = float(t[-1] - t[0]) >= SUSPECT_MS_DURATION_S and bool(np.all(t == np.round(t)))
+    return dense_slow or long_whole
+
+
+def from_csv(path: str | Path, time_unit: str | None = None) -> Profile:
+    """CSV with a header: a time column and ``current_command`` [A] or ``torque_command`` [N·m], optional
+    ``load_torque`` [N·m]. Errors name the line.
+
+    Time: ``time`` in seconds, or a name with its unit (``time_s``, ``time_ms``/``t_ms``, ``time [ms]``, ``_us``,
+    ``_ns``), or ``time_unit`` (one of :data:`TIME_UNITS`; ``simulate --time-unit``) for a unit-less ``time``. A
+    unit-less ``time`` without ``time_unit`` that looks like milliseconds (:func:`looks_like_milliseconds`: a 900 ms
+    log would run for 900 s) is an error saying how to declare the unit; ``time_unit="s"`` confirms seconds."""
     path = Path(path)
+    if time_unit is not None and time_unit not in TIME_UNITS:
+        raise ValueError(f"time unit: expected one of {', '.join(TIME_UNITS)}, got {time_unit!r}")
     with path.open(newline="") as fh:
-        reader = csv.reader(fh)
+        reader = csv.reader(line for line in fh if not line.lstrip().startswith("#"))
         try:
             header = [h.strip() for h in next(reader)]
         except StopIteration:
             raise ValueError(f"{path}: empty file, expected a header line") from None
-        if "time" not in header:
-            raise ValueError(f"{path}:1: header needs a 'time' column [s], got {header}")
+        try:
+            k_time, header_unit = _time_column(header)
+        except ValueError as exc:
+            raise ValueError(f"{path}:1: {exc}") from None
+        if header_unit is not None and time_unit is not None and header_unit != time_unit:
+            raise ValueError(f"{path}:1: column {header[k_time]!r} says {header_unit}, the time unit given is "
+                             f"{time_unit}: drop one of them")
         kind = "current" if "current_command" in header else "torque" if "torque_command" in header else None
         if kind is None:
             raise ValueError(f"{path}:1: header needs 'current_command' [A] or 'torque_command' [N*m]")
-        cols = {"time": header.index("time"), "cmd": header.index(f"{kind}_command")}
+        cols = {"time": k_time, "cmd": header.index(f"{kind}_command")}
         if "load_torque" in header:
             cols["load"] = header.index("load_torque")
         rows = []
@@ -154,8 +200,19 @@ def from_csv(path: str | Path) -> Profile:
     if len(rows) < 2:
         raise ValueError(f"{path}: need at least two command rows")
     data = np.array(rows)
+    unit = header_unit or time_unit
+    if unit is None and looks_like_milliseconds(data[:, 0]):
+        span = float(data[-1, 0] - data[0, 0])
+        raise ValueError(
+            f"{path}: column {header[k_time]!r} looks like milliseconds, expected seconds: {len(data)} rows "
+            f"{float(np.median(np.diff(data[:, 0]))):g} apart would run for {span:g} s ({span / 60:.1f} min) as "
+            f"seconds, {span * 1e-3:g} s as milliseconds. Declare the unit: --time-unit ms (time_unit='ms'), or "
+            f"name the column time_ms / t_ms / 'time [ms]'; --time-unit s (or a column time_s) if it is seconds")
+    data[:, 0] *= TIME_UNITS[unit or "s"]
+    meta = {"time_column": header[k_time], "time_unit": unit or "s"}
     try:
-        return Profile(data[:, 0], data[:, 1], kind, data[:, 2] if "load" in cols else None, name=path.name)
+        return Profile(data[:, 0], data[:, 1], kind, data[:, 2] if "load" in cols else None, name=path.name,
+                       meta=meta)
     except ValueError as exc:
         raise ValueError(f"{path}: {exc}") from None
 

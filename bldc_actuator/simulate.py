@@ -63,6 +63,9 @@ def register(sub) -> None:
                         "next row); also the command rate of step, sine and chirp")
     p.add_argument("--input", type=Path, help="CSV of commands for --profile csv (time, current_command or "
                    "torque_command, optional load_torque)")
+    p.add_argument("--time-unit", choices=list(profiles.TIME_UNITS), default=None,
+                   help="unit of the --input CSV's 'time' column (default: seconds, or the unit its name gives: "
+                        "time_ms, t_ms, 'time [ms]'; a unit-less column that looks like milliseconds is an error)")
     p.add_argument("--load-torque", type=float, default=None, help="constant external load at the output [N*m]")
     p.add_argument("--out", type=Path, default=Path("out/simulate"), help="output prefix (writes PREFIX.csv/.png)")
     p.add_argument("--no-plot", action="store_true", help="skip the PNG")
@@ -93,10 +96,12 @@ def load_params(args) -> ActuatorParams:
 
 
 def build_profile(args) -> profiles.Profile:
+    if args.time_unit is not None and args.profile != "csv":
+        raise ValueError(f"--time-unit: only for --profile csv (the --input CSV's time column), not {args.profile}")
     if args.profile == "csv":
         if not args.input:
             raise ValueError("--input: required with --profile csv (a CSV with time and a command column)")
-        return profiles.from_csv(args.input)
+        return profiles.from_csv(args.input, time_unit=args.time_unit)
     if args.profile == "step":
         return profiles.step(args.amplitude, args.duration, t_step=min(0.05, args.duration / 10), rate=args.rate,
                              kind=args.kind)

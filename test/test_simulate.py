@@ -120,3 +120,40 @@ def test_simulate_summary_is_the_simulations_not_the_output_rates(tmp_path, caps
     assert a.summary.peak_abs_i_q == pytest.approx(b.summary.peak_abs_i_q, rel=1e-9) == pytest.approx(peak, abs=1e-3)
     assert a.summary.ticks == b.summary.ticks == 8000
     assert np.max(np.abs(a["i_q"])) < 5.01 < a.summary.peak_abs_i_q      # the 100 Hz trace misses the overshoot
+
+
+def test_csv_time_in_milliseconds_is_an_error_unless_declared(tmp_path, capsys):
+    """Issue #25: a command CSV whose time column is in ms (0..900 in steps of 1) ran silently for 900 s (rc 0).
+    Now an error naming the column, the expected unit and the fixes; declared (--time-unit ms or a column t_ms),
+    the same file is a 0.9 s run, the same physics as the file written in seconds."""
+    ms_rows = "".join(f"{k},{5.0 if 100 <= k < 600 else 0.0}\n" for k in range(901))
+    src = tmp_path / "ms.csv"
+    src.write_text("time,current_command\n" + ms_rows)
+    out = str(tmp_path / "run")
+    assert main(["simulate", "--profile", "csv", "--input", str(src), "--out", out, "--no-plot"]) == 2
+    err = capsys.readouterr().err
+    assert "'time'" in err and "milliseconds" in err and "expected seconds" in err
+    assert "--time-unit ms" in err and "t_ms" in err and "900 s" in err
+    assert not (tmp_path / "run.csv").exists()
+    with pytest.raises(ValueError, match="looks like milliseconds"):
+        profiles.from_csv(src)
+    # declared: the option, or the header's unit (t_ms, "time [ms]")
+    a = profiles.from_csv(src, time_unit="ms")
+    (tmp_path / "t_ms.csv").write_text("t_ms,current_command\n" + ms_rows)
+    (tmp_path / "bracket.csv").write_text("time [ms],current_command\n" + ms_rows)
+    b, c = profiles.from_csv(tmp_path / "t_ms.csv"), profiles.from_csv(tmp_path / "bracket.csv")
+    assert a.duration == b.duration == c.duration == pytest.approx(0.9)
+    assert np.array_equal(a.t, b.t) and np.array_equal(a.values, c.values)
+    s_rows = "".join(f"{k / 1000!r},{5.0 if 100 <= k < 600 else 0.0}\n" for k in range(901))
+    (tmp_path / "s.csv").write_text("time,current_command\n" + s_rows)
+    assert np.allclose(profiles.from_csv(tmp_path / "s.csv").t, a.t, rtol=0, atol=1e-12)
+    assert main(["simulate", "--profile", "csv", "--input", str(src), "--time-unit", "ms", "--out", out,
+                 "--no-plot", "--preset", "ak80_9"]) == 0
+    assert "duration 0.900 s" in capsys.readouterr().out
+    # a header unit and a different --time-unit contradict each other; --time-unit s confirms seconds
+    with pytest.raises(ValueError, match="says ms"):
+        profiles.from_csv(tmp_path / "t_ms.csv", time_unit="s")
+    assert profiles.from_csv(src, time_unit="s").duration == 900.0
+    # a few sparse rows in seconds (the common hand-written profile) are not suspect
+    (tmp_path / "sparse.csv").write_text("time,current_command\n0,0\n0.05,5\n0.5,0\n1.0,0\n")
+    assert profiles.from_csv(tmp_path / "sparse.csv").duration == 1.0
