@@ -18,6 +18,7 @@ import numpy as np
 from . import profiles
 from .model import Actuator, SimResult
 from .params import ActuatorParams, ParameterError, load_preset, load_yaml
+from .scheduler import ABSURD_FACTOR, absurd_limits
 from .voltage_timing import csv_comment_lines, kernel_declaration
 
 #: columns written to the CSV, in order, with units
@@ -83,8 +84,34 @@ def simulate_profile(params: ActuatorParams | str | Path, profile: profiles.Prof
         params = load_preset(params)
     if rate is not None and not (rate > 0 and np.isfinite(rate)):
         raise ValueError(f"rate: expected > 0 Hz, got {rate!r}")
+    check_commands(params, profile, f"profile {profile.name}")
     # a file's warnings (the current loop's among them) were printed where it was read, with its name
     return Actuator(params, warn=not read).run(profile, record_every=None if rate is None else 1.0 / rate)
+
+
+def check_commands(params: ActuatorParams, profile: profiles.Profile, source: str = "profile") -> None:
+    """Refuse a profile with an absurd command, by the node's rule (:func:`~bldc_actuator.scheduler.absurd_limits`:
+    more than :data:`~bldc_actuator.scheduler.ABSURD_FACTOR` x ``drive.current_limit``, in current or the output
+    torque it makes); ``source`` names where the commands come from (the CSV column, ``--amplitude``). Commands
+    between the limit and that are accepted and limited by the drive, as a real drive does."""
+    current_max, torque_max = absurd_limits(params)
+    limit, unit = (current_max, "A") if profile.kind == "current" else (torque_max, "N*m")
+    bad = np.nonzero(np.abs(profile.values) > limit)[0]
+    if len(bad):
+        k = int(bad[0])
+        raise ValueError(
+            f"{source}: {profile.kind} command {profile.values[k]:g} {unit} (row {k + 1}, t = {profile.t[k]:g} s) is "
+            f"absurd: |{profile.kind} command| <= {limit:g} {unit} ({ABSURD_FACTOR:g} x drive.current_limit "
+            f"{params.drive.current_limit:g} A" + ("" if profile.kind == "current" else
+                                                  f" x motor.torque_constant_q x gear.gear_ratio") +
+            f"; the drive limits |i_q| to drive.current_limit); {len(bad)} row(s) beyond it")
+
+
+def command_source(args, profile: profiles.Profile) -> str:
+    """Where a profile's commands come from (the CSV's column, the options), for error messages."""
+    if args.profile == "csv":
+        return f"{args.input}: column {profile.kind}_command"
+    return "--amplitude/--offset" if args.profile == "sine" else "--amplitude"
 
 
 def load_params(args) -> ActuatorParams:
@@ -184,6 +211,7 @@ def run(args) -> int:
         if args.load_torque is not None:
             params = params.replace(**{"load.load_torque": args.load_torque})
         prof = build_profile(args)
+        check_commands(params, prof, command_source(args, prof))
     except (ParameterError, ValueError) as exc:
         print(f"bldc-actuator simulate: {exc}", file=sys.stderr)
         return 2

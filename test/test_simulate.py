@@ -157,3 +157,34 @@ def test_csv_time_in_milliseconds_is_an_error_unless_declared(tmp_path, capsys):
     # a few sparse rows in seconds (the common hand-written profile) are not suspect
     (tmp_path / "sparse.csv").write_text("time,current_command\n0,0\n0.05,5\n0.5,0\n1.0,0\n")
     assert profiles.from_csv(tmp_path / "sparse.csv").duration == 1.0
+
+
+def test_absurd_commands_are_refused_by_the_nodes_rule(tmp_path, capsys):
+    """Issue #25: a 1.5e12 N*m command was accepted silently. Refused (exit 2) with the field, the limit and unit:
+    the node scheduler's rule (scheduler.absurd_limits: 10 x drive.current_limit, in current or output torque),
+    not a second one; a command between the limit and that is accepted and limited by the drive."""
+    from bldc_actuator.params import load_preset
+    from bldc_actuator.scheduler import absurd_limits
+    from bldc_actuator.simulate import simulate_profile
+
+    p = load_preset("ak80_9")
+    i_max, tau_max = absurd_limits(p)
+    assert i_max == pytest.approx(10 * p.drive.current_limit)
+    src = tmp_path / "absurd.csv"
+    src.write_text("time,torque_command\n0,0\n0.01,1.5e12\n0.02,0\n")
+    out = str(tmp_path / "run")
+    assert main(["simulate", "--profile", "csv", "--input", str(src), "--out", out, "--no-plot",
+                 "--preset", "ak80_9"]) == 2
+    err = capsys.readouterr().err
+    assert "torque_command" in err and "1.5e+12 N*m" in err and "absurd" in err
+    assert f"{tau_max:g} N*m" in err and "drive.current_limit" in err
+    assert not (tmp_path / "run.csv").exists()
+    assert main(["simulate", "--amplitude", "1e6", "--out", out, "--no-plot"]) == 2
+    err = capsys.readouterr().err
+    assert "--amplitude" in err and "current command 1e+06 A" in err and " A (10 x drive.current_limit" in err
+    with pytest.raises(ValueError, match="absurd"):
+        simulate_profile(p, profiles.step(1.5e12, 0.1, kind="torque"))
+    # just inside the node's bound: accepted, the drive limits the current to drive.current_limit
+    r = simulate_profile(p, profiles.step(0.99 * i_max, 0.02, t_step=0.005))
+    assert r.summary.peak_abs_i_q <= p.drive.current_limit * 1.1
+    assert np.max(r["i_q_ref"]) == pytest.approx(p.drive.current_limit)
