@@ -540,6 +540,13 @@ class Actuator(_Base):
         self._set("cmd_q", float(i_q_ref))
         self._current_mode()
 
+    @property
+    def current_command(self) -> float:
+        """The q-axis current command [A] the drive holds: the last current command, or a torque command converted
+        with the drive's torque constant; before the current limit and derating (``outputs()["i_q_ref"]`` is the
+        reference after them, as of the last controller tick)."""
+        return float(self._get("cmd_q"))
+
     def _current_mode(self) -> None:
         if self._v_mode:
             self._set("v_mode", False)

@@ -234,6 +234,7 @@ def run_profile(actuator, profile: Profile, *, record_every: float | None = None
     cmd_idx = np.searchsorted(t_ns, events, side="right") - 1
     is_rec = np.isin(events, rec_ns)
     rows: list[dict] = []
+    commanded: list[float] = []                            # the q-axis current command from each sample on
     load = profile.load_torque
     ticks = [actuator.trace_ns(0, include_start=True)]     # the summary's states: the start and every tick
     for k, (ev, ci, rec) in enumerate(zip(events, cmd_idx, is_rec)):
@@ -243,10 +244,13 @@ def run_profile(actuator, profile: Profile, *, record_every: float | None = None
         if rec:
             rows.append(actuator.outputs())
         setter(float(profile.values[ci]))
+        if rec:
+            commanded.append(actuator.current_command)
         if load is not None:
             actuator.set_load_torque(float(load[ci]))
     keys = [k for k, v in rows[0].items() if isinstance(v, (int, float, bool, np.bool_))]
     signals = {k: np.array([r[k] for r in rows], dtype=float) for k in keys}
     signals["command"] = profile.values[np.searchsorted(t_ns, rec_ns, side="right") - 1]
+    signals["i_q_command"] = np.array(commanded)
     summary = RunSummary.from_signals(actuator.tick_signals(np.concatenate(ticks)))
     return SimResult(signals, actuator.params, summary)

@@ -29,6 +29,9 @@ CSV_COLUMNS = [
     ("effort_out", "N*m"), ("i_phase_a", "A"), ("i_phase_b", "A"), ("i_phase_c", "A"), ("i_line_a", "A"),
     ("i_line_b", "A"), ("i_line_c", "A"), ("T_winding", "degC"), ("T_housing", "degC"),
     ("resistance_phase", "ohm"), ("joule_power", "W"), ("current_limit_effective", "A"),
+    # the q-axis current command from the sample on (a torque command converted as the drive does), before limits:
+    # what a drive log calls its command (i_q_ref is the drive's reference as of its last tick, one sample behind)
+    ("i_q_command", "A"),
 ]
 
 
