@@ -54,3 +54,23 @@ def test_diagnose_reads_simulates_csv_without_map_and_finds_nothing_missing(nomi
     assert d["nothing_missing"] is True, d["verdict"]
     assert not d["findings"]
     assert any("declared by the recording" in n for n in d["notes"])     # the comment lines' voltage timing
+
+
+def test_diagnose_of_simulates_csv_recovers_a_changed_resistance(tmp_path, capsys):
+    """The recording made with R x 1.3 (0.169 ohm) against the nominal ak80_9 (0.13): the base-model check names
+    phase_resistance from the voltage equation, within 5 % of the true value."""
+    import re
+
+    from bldc_actuator.params import dump_yaml, load_preset
+
+    true_r = 0.13 * 1.3
+    dump_yaml(load_preset("ak80_9").replace(**{"motor.phase_resistance": true_r}), tmp_path / "r.yaml")
+    assert main([*SIMULATE, "--params", str(tmp_path / "r.yaml"), "--out", str(tmp_path / "r")]) == 0
+    report = tmp_path / "r.json"
+    assert main(["diagnose", "--params", "ak80_9", str(tmp_path / "r.csv"), "--no-plots", "--json", str(report)]) == 0
+    capsys.readouterr()
+    d = json.loads(report.read_text())
+    assert d["verdict"].startswith("base model far off")
+    m = re.search(r"phase_resistance ([0-9.]+) \(nominal 0.13", d["verdict"])
+    assert m, d["verdict"]
+    assert float(m.group(1)) == pytest.approx(true_r, rel=0.05)
