@@ -236,11 +236,12 @@ def run_profile(actuator, profile: Profile, *, record_every: float | None = None
     rows: list[dict] = []
     commanded: list[float] = []                            # the q-axis current command from each sample on
     load = profile.load_torque
-    ticks = [actuator.trace_ns(0, include_start=True)]     # the summary's states: the start and every tick
+    ticks = actuator.tick_trace(int(profile.duration * actuator.params.drive.current_loop_rate) + 2)
+    ticks.record_now()                                     # the summary's states: the start and every tick
     for k, (ev, ci, rec) in enumerate(zip(events, cmd_idx, is_rec)):
         target = start + int(ev - t_ns[0])
         if target > actuator.t_ns:
-            ticks.append(actuator.trace_ns(target - actuator.t_ns))
+            ticks.step_ns(target - actuator.t_ns)
         if rec:
             rows.append(actuator.outputs())
         setter(float(profile.values[ci]))
@@ -252,5 +253,5 @@ def run_profile(actuator, profile: Profile, *, record_every: float | None = None
     signals = {k: np.array([r[k] for r in rows], dtype=float) for k in keys}
     signals["command"] = profile.values[np.searchsorted(t_ns, rec_ns, side="right") - 1]
     signals["i_q_command"] = np.array(commanded)
-    summary = RunSummary.from_signals(actuator.tick_signals(np.concatenate(ticks)))
+    summary = RunSummary.from_signals(actuator.tick_signals(ticks.states()))
     return SimResult(signals, actuator.params, summary)
