@@ -4,6 +4,12 @@ Example::
 
     bldc-actuator simulate --preset ak80_9 --profile chirp --amplitude 5 --f0 1 --f1 100 --duration 2
     bldc-actuator simulate --params my_motor.yaml --profile csv --input commands.csv --out out/run1
+    bldc-actuator simulate --preset ak80_9 --profile csv --input log_ms.csv --time-unit ms
+
+The CSV written (PREFIX.csv) is read back by ``bldc-actuator diagnose`` without ``--map`` (input profile
+``bldc_actuator_simulate``, with the ``# voltage_timing`` comment lines). The printed summary covers every
+current-loop tick, whatever ``--rate``. Commands beyond the node's absurd bound (``scheduler.absurd_limits``) are
+refused.
 """
 
 from __future__ import annotations
