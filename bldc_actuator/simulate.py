@@ -112,8 +112,10 @@ def check_commands(params: ActuatorParams, profile: profiles.Profile, source: st
             f"{source}: {profile.kind} command {profile.values[k]:g} {unit} (row {k + 1}, t = {profile.t[k]:g} s) is "
             f"absurd: |{profile.kind} command| <= {limit:g} {unit} ({ABSURD_FACTOR:g} x drive.current_limit "
             f"{params.drive.current_limit:g} A" + ("" if profile.kind == "current" else
-                                                  f" x motor.torque_constant_q x gear.gear_ratio") +
-            f"; the drive limits |i_q| to drive.current_limit); {len(bad)} row(s) beyond it")
+                                                  " x motor.torque_constant_q x gear.gear_ratio") +
+            f"; the drive itself limits |i_q| to drive.current_limit {params.drive.current_limit:g} A"
+            + ("" if profile.kind == "current" else f", {limit / ABSURD_FACTOR:g} N*m at the output")
+            + f"); {len(bad)} row(s) beyond it")
 
 
 def command_source(args, profile: profiles.Profile) -> str:
