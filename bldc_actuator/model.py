@@ -540,6 +540,13 @@ class Actuator(_Base):
         self._set("cmd_q", float(i_q_ref))
         self._current_mode()
 
+    @property
+    def current_command(self) -> float:
+        """The q-axis current command [A] the drive holds: the last current command, or a torque command converted
+        with the drive's torque constant; before the current limit and derating (``outputs()["i_q_ref"]`` is the
+        reference after them, as of the last controller tick)."""
+        return float(self._get("cmd_q"))
+
     def _current_mode(self) -> None:
         if self._v_mode:
             self._set("v_mode", False)
@@ -636,11 +643,117 @@ class Actuator(_Base):
         return (theta / c.N, omega / c.N, _torque_constant_q(c, i_q, T_h) * i_q * c.N,
                 _voltage_saturated(c, abs(v)))
 
+    def tick_trace(self, capacity: int = 1024) -> "TickTrace":
+        """A :class:`TickTrace` of this actuator: step through it to record the state at every current-loop tick
+        (its buffers grow as needed; ``capacity`` ticks at first)."""
+        return TickTrace(self, capacity)
+
+    def trace_ns(self, dt_ns: int, *, include_start: bool = False) -> np.ndarray:
+        """Advance ``dt_ns`` [ns] as :meth:`step_ns` does and return the state (:data:`TRACE_DTYPE`) at every
+        current-loop tick instant passed (see :class:`TickTrace`); ``include_start``: the state now first."""
+        tr = TickTrace(self, int(dt_ns) // int(self._c.tick_ns) + 2)
+        if include_start:
+            tr.record_now()
+        tr.step_ns(dt_ns)
+        return tr.states()
+
+    def tick_signals(self, states: np.ndarray) -> dict[str, np.ndarray]:
+        """Signals of traced states (:meth:`trace_ns`) by the formulas of :meth:`outputs`: ``t`` [s], ``i_d``,
+        ``i_q`` [A], ``v_magnitude_q`` [V] (the voltage held up to the instant), ``voltage_saturated``,
+        ``velocity_out`` [rad/s] (what the encoder reports: the load behind a compliant transmission with
+        ``gear.encoder_side: load``), ``T_winding``, ``T_housing`` [degC]."""
+        c = self._c
+        v_mag = np.abs(states["v"])
+        if c.enc_load and c.compliant:
+            velocity_out = states["omega_l"].copy()
+        else:
+            velocity_out = states["omega"] / c.N
+        return {"t": states["t_ns"] * 1e-9, "i_d": states["i"].real.copy(), "i_q": states["i"].imag.copy(),
+                "v_magnitude_q": v_mag, "voltage_saturated": _voltage_saturated(c, v_mag),
+                "velocity_out": velocity_out, "T_winding": states["T_w"].copy(), "T_housing": states["T_h"].copy()}
+
     def run(self, profile, *, record_every: float | None = None) -> "SimResult":
         """Run a command profile (see :mod:`bldc_actuator.profiles`) and return every signal."""
         from .profiles import run_profile
 
         return run_profile(self, profile, record_every=record_every)
+
+
+#: what :class:`TickTrace` records at every tick (fields of :data:`kernel.STATE_DTYPE`)
+TRACE_DTYPE = np.dtype([(name, STATE_DTYPE[name]) for name in ("t_ns", "i", "v", "omega", "omega_l", "T_w", "T_h")])
+_kernel_step = kernel.step
+
+
+@kernel.jit
+def _trace_ticks(cs, ss, first, n, tick, end, k0, now, t_ns, i, v, omega, omega_l, T_w, T_h):
+    """Actuator 0 of ``cs``/``ss``: with ``now`` the state now at index ``k0``; then stepped to each tick instant
+    ``first + k tick`` (k < n), the state after each at the next index; then to ``end``. Returns the next index."""
+    c = cs[0]
+    s = ss[0]
+    k1 = k0
+    for k in range(-1 if now else 0, n):
+        if k >= 0:
+            b = first + k * tick
+            if b > s.t_ns:
+                _kernel_step(c, s, b - s.t_ns)
+        t_ns[k1] = s.t_ns
+        i[k1] = s.i
+        v[k1] = s.v
+        omega[k1] = s.omega
+        omega_l[k1] = s.omega_l
+        T_w[k1] = s.T_w
+        T_h[k1] = s.T_h
+        k1 += 1
+    if end > s.t_ns:
+        _kernel_step(c, s, end - s.t_ns)
+    return k1
+
+
+class TickTrace:
+    """The state of an :class:`Actuator` at every current-loop tick while it is stepped through this object
+    (:meth:`step_ns`): the kernel's own resolution, whatever the caller's steps (a peak between two of the caller's
+    samples is recorded). One compiled loop over :func:`kernel.step` per call, into growing column buffers."""
+
+    def __init__(self, actuator: "Actuator", capacity: int = 1024):
+        self._act = actuator
+        self._cols = [np.empty(max(int(capacity), 1), TRACE_DTYPE[name]) for name in TRACE_DTYPE.names]
+        self.n = 0                                  #: states recorded
+
+    def _reserve(self, extra: int) -> None:
+        size = len(self._cols[0])
+        if self.n + extra > size:
+            new = max(self.n + extra, 2 * size)
+            self._cols = [np.concatenate([c[:self.n], np.empty(new - self.n, c.dtype)]) for c in self._cols]
+
+    def _run(self, first: int, n: int, end: int, now: bool) -> None:
+        a = self._act
+        self._reserve(n + int(now))
+        cs, ss = (a._cs, a._ss) if a._rs is None else (a._rc, a._rs)  # noqa: SLF001 - the actuator's own records
+        self.n = int(_trace_ticks(cs, ss, first, n, int(a._c.tick_ns), end, self.n, now, *self._cols))  # noqa: SLF001
+
+    def record_now(self) -> None:
+        """Record the state as it is now (wherever it is: the start of a run)."""
+        t = self._act.t_ns
+        self._run(t, 0, t, True)
+
+    def step_ns(self, dt_ns: int) -> None:
+        """Advance the actuator ``dt_ns`` [ns] (as :meth:`Actuator.step_ns`), recording the state at every tick
+        instant passed (``t_ns`` a multiple of the loop period, after the start, up to and including the end)."""
+        dt_ns = int(dt_ns)
+        if dt_ns < 0:
+            raise ValueError(f"dt: expected a duration >= 0 ns, got {dt_ns!r}")
+        tick = int(self._act._c.tick_ns)  # noqa: SLF001
+        t = self._act.t_ns
+        end = t + dt_ns
+        first = (t // tick + 1) * tick
+        self._run(first, (end - first) // tick + 1 if first <= end else 0, end, False)
+
+    def states(self) -> np.ndarray:
+        """The recorded states (:data:`TRACE_DTYPE`), in time order."""
+        out = np.empty(self.n, TRACE_DTYPE)
+        for name, col in zip(TRACE_DTYPE.names, self._cols):
+            out[name] = col[:self.n]
+        return out
 
 
 def _torque_constant_q(c: _Coeffs, i_q, T_h):

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -17,12 +18,40 @@ import numpy as np
 KINDS = ("current", "torque")
 
 
+@dataclass(frozen=True)
+class RunSummary:
+    """A run's figures at the kernel's resolution: every current-loop tick (and the start), whatever the rate the
+    signals were sampled at (a peak between two output samples is a peak)."""
+
+    duration: float                     #: [s]
+    ticks: int                          #: current-loop ticks the figures cover
+    peak_abs_i_q: float                 #: max |i_q| [A]
+    peak_abs_i_d: float                 #: max |i_d| [A]
+    peak_abs_velocity_out: float        #: max |velocity_out| [rad/s, output side]
+    saturated_fraction: float           #: fraction of the ticks whose held voltage is on the inverter's circle
+    T_winding_start: float              #: [degC]
+    T_winding_end: float                #: [degC]
+    T_winding_peak: float               #: [degC]
+
+    @classmethod
+    def from_signals(cls, sig: dict[str, np.ndarray]) -> "RunSummary":
+        """From :meth:`~bldc_actuator.model.Actuator.tick_signals` of the run's tick states (the start first)."""
+        t = sig["t"]
+        return cls(duration=float(t[-1] - t[0]), ticks=len(t) - 1,
+                   peak_abs_i_q=float(np.max(np.abs(sig["i_q"]))), peak_abs_i_d=float(np.max(np.abs(sig["i_d"]))),
+                   peak_abs_velocity_out=float(np.max(np.abs(sig["velocity_out"]))),
+                   saturated_fraction=float(np.mean(sig["voltage_saturated"][1:])) if len(t) > 1 else 0.0,
+                   T_winding_start=float(sig["T_winding"][0]), T_winding_end=float(sig["T_winding"][-1]),
+                   T_winding_peak=float(np.max(sig["T_winding"])))
+
+
 @dataclass
 class SimResult:
     """Signals sampled over a run: each field an array over sample times (see :func:`Actuator.outputs`)."""
 
     signals: dict[str, np.ndarray]
     params: object                      #: the :class:`~bldc_actuator.params.ActuatorParams` of the run
+    summary: RunSummary | None = None   #: the run's figures at every current-loop tick (:func:`run_profile`)
 
     def __getitem__(self, key: str) -> np.ndarray:
         return self.signals[key]
@@ -96,22 +125,67 @@ def chirp(amplitude: float, f0: float, f1: float, duration: float = 2.0, rate: f
                    name=f"chirp {f0:g}-{f1:g} Hz")
 
 
-def from_csv(path: str | Path) -> Profile:
-    """CSV with a header: ``time`` [s] and ``current_command`` [A] or ``torque_command`` [N·m],
-    optional ``load_torque`` [N·m]. Errors name the line."""
+#: time units a command CSV may be in -> seconds per unit
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+#: a time column's name: ``time`` (seconds, checked), or ``time``/``t`` with its unit (``time_ms``, ``t [ms]``)
+_TIME_COLUMN = re.compile(r"^(?:time|t)(?:_(s|ms|us|ns)|\s*\[\s*(s|ms|us|µs|ns)\s*\])$|^time$")
+#: a unit-less ``time`` column is taken for milliseconds (an error) when it has at least this many rows spaced
+#: >= 1 s (as seconds a table of commands at <= 1 Hz, as milliseconds an ordinary log at <= 1 kHz), or when it
+#: lasts at least this long in whole numbers
+SUSPECT_MS_ROWS = 20
+SUSPECT_MS_DURATION_S = 60.0
+
+
+def _time_column(header: list[str]) -> tuple[int, str | None]:
+    """(index, unit named in the header or None) of the time column; ValueError when there is none."""
+    for k, name in enumerate(header):
+        m = _TIME_COLUMN.match(name)
+        if m:
+            unit = m.group(1) or m.group(2)
+            return k, (None if unit is None else unit.replace("µ", "u"))
+    raise ValueError("header needs a 'time' column [s] (or one naming its unit: time_s, time_ms, t_ms, "
+                     f"'time [ms]', time_us, time_ns), got {header}")
+
+
+def looks_like_milliseconds(t: np.ndarray) -> bool:
+    """Whether a time column read as seconds looks like milliseconds (see :data:`SUSPECT_MS_ROWS`)."""
+    t = np.asarray(t, float)
+    if len(t) < 2:
+        return False
+    dt = np.diff(t)
+    dense_slow = len(t) >= SUSPECT_MS_ROWS and float(np.median(dt)) >= 1.0
+    long_whole = float(t[-1] - t[0]) >= SUSPECT_MS_DURATION_S and bool(np.all(t == np.round(t)))
+    return dense_slow or long_whole
+
+
+def from_csv(path: str | Path, time_unit: str | None = None) -> Profile:
+    """CSV with a header: a time column and ``current_command`` [A] or ``torque_command`` [N·m], optional
+    ``load_torque`` [N·m]. Errors name the line.
+
+    Time: ``time`` in seconds, or a name with its unit (``time_s``, ``time_ms``/``t_ms``, ``time [ms]``, ``_us``,
+    ``_ns``), or ``time_unit`` (one of :data:`TIME_UNITS`; ``simulate --time-unit``) for a unit-less ``time``. A
+    unit-less ``time`` without ``time_unit`` that looks like milliseconds (:func:`looks_like_milliseconds`: a 900 ms
+    log would run for 900 s) is an error saying how to declare the unit; ``time_unit="s"`` confirms seconds."""
     path = Path(path)
+    if time_unit is not None and time_unit not in TIME_UNITS:
+        raise ValueError(f"time unit: expected one of {', '.join(TIME_UNITS)}, got {time_unit!r}")
     with path.open(newline="") as fh:
-        reader = csv.reader(fh)
+        reader = csv.reader(line for line in fh if not line.lstrip().startswith("#"))
         try:
             header = [h.strip() for h in next(reader)]
         except StopIteration:
             raise ValueError(f"{path}: empty file, expected a header line") from None
-        if "time" not in header:
-            raise ValueError(f"{path}:1: header needs a 'time' column [s], got {header}")
+        try:
+            k_time, header_unit = _time_column(header)
+        except ValueError as exc:
+            raise ValueError(f"{path}:1: {exc}") from None
+        if header_unit is not None and time_unit is not None and header_unit != time_unit:
+            raise ValueError(f"{path}:1: column {header[k_time]!r} says {header_unit}, the time unit given is "
+                             f"{time_unit}: drop one of them")
         kind = "current" if "current_command" in header else "torque" if "torque_command" in header else None
         if kind is None:
             raise ValueError(f"{path}:1: header needs 'current_command' [A] or 'torque_command' [N*m]")
-        cols = {"time": header.index("time"), "cmd": header.index(f"{kind}_command")}
+        cols = {"time": k_time, "cmd": header.index(f"{kind}_command")}
         if "load_torque" in header:
             cols["load"] = header.index("load_torque")
         rows = []
@@ -126,16 +200,28 @@ def from_csv(path: str | Path) -> Profile:
     if len(rows) < 2:
         raise ValueError(f"{path}: need at least two command rows")
     data = np.array(rows)
+    unit = header_unit or time_unit
+    if unit is None and looks_like_milliseconds(data[:, 0]):
+        span = float(data[-1, 0] - data[0, 0])
+        raise ValueError(
+            f"{path}: column {header[k_time]!r} looks like milliseconds, expected seconds: {len(data)} rows "
+            f"{float(np.median(np.diff(data[:, 0]))):g} apart would run for {span:g} s ({span / 60:.1f} min) as "
+            f"seconds, {span * 1e-3:g} s as milliseconds. Declare the unit: --time-unit ms (time_unit='ms'), or "
+            f"name the column time_ms / t_ms / 'time [ms]'; --time-unit s (or a column time_s) if it is seconds")
+    data[:, 0] *= TIME_UNITS[unit or "s"]
+    meta = {"time_column": header[k_time], "time_unit": unit or "s"}
     try:
-        return Profile(data[:, 0], data[:, 1], kind, data[:, 2] if "load" in cols else None, name=path.name)
+        return Profile(data[:, 0], data[:, 1], kind, data[:, 2] if "load" in cols else None, name=path.name,
+                       meta=meta)
     except ValueError as exc:
         raise ValueError(f"{path}: {exc}") from None
 
 
 #: signals recorded by :func:`run_profile` (all of :func:`Actuator.outputs` that are numbers)
 def run_profile(actuator, profile: Profile, *, record_every: float | None = None):
-    """Drive ``actuator`` with ``profile``; record outputs at every profile sample (or every
-    ``record_every`` seconds). Returns a :class:`SimResult`."""
+    """Drive ``actuator`` (an :class:`~bldc_actuator.model.Actuator`) with ``profile``; record outputs at every
+    profile sample (or every ``record_every`` seconds). Returns a :class:`SimResult` whose ``summary`` covers every
+    current-loop tick (:class:`RunSummary`), not only the recorded samples."""
 
     setter = actuator.set_current_command if profile.kind == "current" else actuator.set_torque_command
     t_ns = np.round(profile.t * 1e9).astype(np.int64)
@@ -148,17 +234,24 @@ def run_profile(actuator, profile: Profile, *, record_every: float | None = None
     cmd_idx = np.searchsorted(t_ns, events, side="right") - 1
     is_rec = np.isin(events, rec_ns)
     rows: list[dict] = []
+    commanded: list[float] = []                            # the q-axis current command from each sample on
     load = profile.load_torque
+    ticks = actuator.tick_trace(int(profile.duration * actuator.params.drive.current_loop_rate) + 2)
+    ticks.record_now()                                     # the summary's states: the start and every tick
     for k, (ev, ci, rec) in enumerate(zip(events, cmd_idx, is_rec)):
         target = start + int(ev - t_ns[0])
         if target > actuator.t_ns:
-            actuator.step_ns(target - actuator.t_ns)
+            ticks.step_ns(target - actuator.t_ns)
         if rec:
             rows.append(actuator.outputs())
         setter(float(profile.values[ci]))
+        if rec:
+            commanded.append(actuator.current_command)
         if load is not None:
             actuator.set_load_torque(float(load[ci]))
     keys = [k for k, v in rows[0].items() if isinstance(v, (int, float, bool, np.bool_))]
     signals = {k: np.array([r[k] for r in rows], dtype=float) for k in keys}
     signals["command"] = profile.values[np.searchsorted(t_ns, rec_ns, side="right") - 1]
-    return SimResult(signals, actuator.params)
+    signals["i_q_command"] = np.array(commanded)
+    summary = RunSummary.from_signals(actuator.tick_signals(ticks.states()))
+    return SimResult(signals, actuator.params, summary)

@@ -106,6 +106,14 @@ class JointCommand:
     torque_abs_max: float = math.inf
 
 
+def absurd_limits(p: ActuatorParams) -> tuple[float, float]:
+    """``(current [A, q-axis], torque [N*m, output])``: a command beyond either in magnitude is absurd and rejected
+    (:data:`ABSURD_FACTOR` x ``drive.current_limit``, and its output torque through ``motor.torque_constant_q`` and
+    ``gear.gear_ratio``); the node's rule, which ``bldc-actuator simulate`` applies to its profiles too."""
+    current = ABSURD_FACTOR * p.drive.current_limit
+    return current, current * p.motor.torque_constant_q * p.gear.gear_ratio
+
+
 @dataclass(frozen=True)
 class Health:
     """One joint's diagnostics: level (:data:`OK`, :data:`WARN`, :data:`ERROR`), message, key values."""
@@ -387,8 +395,7 @@ class Scheduler:
     # ------------------------------------------------------------------------------------ commands
 
     def _limits(self, j: JointCommand, p: ActuatorParams) -> None:
-        j.current_abs_max = ABSURD_FACTOR * p.drive.current_limit
-        j.torque_abs_max = j.current_abs_max * p.motor.torque_constant_q * p.gear.gear_ratio
+        j.current_abs_max, j.torque_abs_max = absurd_limits(p)
 
     def _for(self, j: JointCommand) -> str:
         return f" for joint {j.name}" if self.config.name_joints else ""

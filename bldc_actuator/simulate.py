@@ -4,6 +4,12 @@ Example::
 
     bldc-actuator simulate --preset ak80_9 --profile chirp --amplitude 5 --f0 1 --f1 100 --duration 2
     bldc-actuator simulate --params my_motor.yaml --profile csv --input commands.csv --out out/run1
+    bldc-actuator simulate --preset ak80_9 --profile csv --input log_ms.csv --time-unit ms
+
+The CSV written (PREFIX.csv) is read back by ``bldc-actuator diagnose`` without ``--map`` (input profile
+``bldc_actuator_simulate``, with the ``# voltage_timing`` comment lines). The printed summary covers every
+current-loop tick, whatever ``--rate``. Commands beyond the node's absurd bound (``scheduler.absurd_limits``) are
+refused.
 """
 
 from __future__ import annotations
@@ -18,6 +24,7 @@ import numpy as np
 from . import profiles
 from .model import Actuator, SimResult
 from .params import ActuatorParams, ParameterError, load_preset, load_yaml
+from .scheduler import ABSURD_FACTOR, absurd_limits
 from .voltage_timing import csv_comment_lines, kernel_declaration
 
 #: columns written to the CSV, in order, with units
@@ -28,6 +35,9 @@ CSV_COLUMNS = [
     ("effort_out", "N*m"), ("i_phase_a", "A"), ("i_phase_b", "A"), ("i_phase_c", "A"), ("i_line_a", "A"),
     ("i_line_b", "A"), ("i_line_c", "A"), ("T_winding", "degC"), ("T_housing", "degC"),
     ("resistance_phase", "ohm"), ("joule_power", "W"), ("current_limit_effective", "A"),
+    # the q-axis current command from the sample on (a torque command converted as the drive does), before limits:
+    # what a drive log calls its command (i_q_ref is the drive's reference as of its last tick, one sample behind)
+    ("i_q_command", "A"),
 ]
 
 
@@ -63,6 +73,9 @@ def register(sub) -> None:
                         "next row); also the command rate of step, sine and chirp")
     p.add_argument("--input", type=Path, help="CSV of commands for --profile csv (time, current_command or "
                    "torque_command, optional load_torque)")
+    p.add_argument("--time-unit", choices=list(profiles.TIME_UNITS), default=None,
+                   help="unit of the --input CSV's 'time' column (default: seconds, or the unit its name gives: "
+                        "time_ms, t_ms, 'time [ms]'; a unit-less column that looks like milliseconds is an error)")
     p.add_argument("--load-torque", type=float, default=None, help="constant external load at the output [N*m]")
     p.add_argument("--out", type=Path, default=Path("out/simulate"), help="output prefix (writes PREFIX.csv/.png)")
     p.add_argument("--no-plot", action="store_true", help="skip the PNG")
@@ -80,8 +93,36 @@ def simulate_profile(params: ActuatorParams | str | Path, profile: profiles.Prof
         params = load_preset(params)
     if rate is not None and not (rate > 0 and np.isfinite(rate)):
         raise ValueError(f"rate: expected > 0 Hz, got {rate!r}")
+    check_commands(params, profile, f"profile {profile.name}")
     # a file's warnings (the current loop's among them) were printed where it was read, with its name
     return Actuator(params, warn=not read).run(profile, record_every=None if rate is None else 1.0 / rate)
+
+
+def check_commands(params: ActuatorParams, profile: profiles.Profile, source: str = "profile") -> None:
+    """Refuse a profile with an absurd command, by the node's rule (:func:`~bldc_actuator.scheduler.absurd_limits`:
+    more than :data:`~bldc_actuator.scheduler.ABSURD_FACTOR` x ``drive.current_limit``, in current or the output
+    torque it makes); ``source`` names where the commands come from (the CSV column, ``--amplitude``). Commands
+    between the limit and that are accepted and limited by the drive, as a real drive does."""
+    current_max, torque_max = absurd_limits(params)
+    limit, unit = (current_max, "A") if profile.kind == "current" else (torque_max, "N*m")
+    bad = np.nonzero(np.abs(profile.values) > limit)[0]
+    if len(bad):
+        k = int(bad[0])
+        raise ValueError(
+            f"{source}: {profile.kind} command {profile.values[k]:g} {unit} (row {k + 1}, t = {profile.t[k]:g} s) is "
+            f"absurd: |{profile.kind} command| <= {limit:g} {unit} ({ABSURD_FACTOR:g} x drive.current_limit "
+            f"{params.drive.current_limit:g} A" + ("" if profile.kind == "current" else
+                                                  " x motor.torque_constant_q x gear.gear_ratio") +
+            f"; the drive itself limits |i_q| to drive.current_limit {params.drive.current_limit:g} A"
+            + ("" if profile.kind == "current" else f", {limit / ABSURD_FACTOR:g} N*m at the output")
+            + f"); {len(bad)} row(s) beyond it")
+
+
+def command_source(args, profile: profiles.Profile) -> str:
+    """Where a profile's commands come from (the CSV's column, the options), for error messages."""
+    if args.profile == "csv":
+        return f"{args.input}: column {profile.kind}_command"
+    return "--amplitude/--offset" if args.profile == "sine" else "--amplitude"
 
 
 def load_params(args) -> ActuatorParams:
@@ -93,10 +134,12 @@ def load_params(args) -> ActuatorParams:
 
 
 def build_profile(args) -> profiles.Profile:
+    if args.time_unit is not None and args.profile != "csv":
+        raise ValueError(f"--time-unit: only for --profile csv (the --input CSV's time column), not {args.profile}")
     if args.profile == "csv":
         if not args.input:
             raise ValueError("--input: required with --profile csv (a CSV with time and a command column)")
-        return profiles.from_csv(args.input)
+        return profiles.from_csv(args.input, time_unit=args.time_unit)
     if args.profile == "step":
         return profiles.step(args.amplitude, args.duration, t_step=min(0.05, args.duration / 10), rate=args.rate,
                              kind=args.kind)
@@ -163,12 +206,15 @@ def plot(result: SimResult, path: Path, title: str = "") -> None:
 
 
 def summary(result: SimResult) -> str:
-    sat = float(np.mean(result["voltage_saturated"])) * 100
-    return (f"duration {result['t'][-1]:.3f} s, samples {len(result['t'])}\n"
-            f"peak |i_q| {np.max(np.abs(result['i_q'])):.3f} A, peak output speed "
-            f"{np.max(np.abs(result['velocity_out'])):.3f} rad/s, voltage saturated {sat:.1f} % of samples\n"
-            f"winding temperature {result['T_winding'][0]:.2f} -> {result['T_winding'][-1]:.2f} degC "
-            f"(peak {np.max(result['T_winding']):.2f})")
+    """The run's figures, from the simulation at every current-loop tick (:class:`profiles.RunSummary`), not from
+    the trace sampled at ``--rate`` (whose peak between samples depends on the rate)."""
+    s = result.summary
+    return (f"duration {s.duration:.3f} s, samples {len(result['t'])} at the output rate, current-loop ticks "
+            f"{s.ticks} (the figures below cover every tick)\n"
+            f"peak |i_q| {s.peak_abs_i_q:.3f} A, peak output speed {s.peak_abs_velocity_out:.3f} rad/s, "
+            f"voltage saturated {100 * s.saturated_fraction:.1f} % of ticks\n"
+            f"winding temperature {s.T_winding_start:.2f} -> {s.T_winding_end:.2f} degC "
+            f"(peak {s.T_winding_peak:.2f})")
 
 
 def run(args) -> int:
@@ -177,6 +223,7 @@ def run(args) -> int:
         if args.load_torque is not None:
             params = params.replace(**{"load.load_torque": args.load_torque})
         prof = build_profile(args)
+        check_commands(params, prof, command_source(args, prof))
     except (ParameterError, ValueError) as exc:
         print(f"bldc-actuator simulate: {exc}", file=sys.stderr)
         return 2

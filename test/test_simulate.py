@@ -93,3 +93,126 @@ def test_simulate_csv_writes_at_the_output_rate_not_at_the_input_rows(tmp_path, 
     # --rate sets the output rate of a csv profile too
     _, c = _simulate_csv(tmp_path, "slow", short, "--rate", "200")
     assert len(c) == 201 and np.max(np.abs(c[:, i_q])) == pytest.approx(peak_dense, rel=0.05)
+
+
+def _summary_lines(out):
+    return [line for line in out.splitlines() if line.startswith(("peak |i_q|", "winding temperature"))]
+
+
+def test_simulate_summary_is_the_simulations_not_the_output_rates(tmp_path, capsys):
+    """Issue #25: the printed peak |i_q| was the peak of the trace sampled at --rate (5.00 / 5.87 / 7.57 A at 100 /
+    1000 / 10000 Hz for one run: a +5 A run-up to the voltage limit, then -5 A at 228 rad/s, whose overshoot lasts a
+    few ticks). The summary covers every current-loop tick: the same figures at every rate, the overshoot's peak."""
+    rows = [(0.0, 0.0), (0.05, 5.0), (0.6, -5.0), (0.8, -5.0)]
+    lines = {}
+    for rate in ("100", "1000", "10000"):
+        _simulate_csv(tmp_path, f"rev{rate}", rows, "--rate", rate)
+        lines[rate] = _summary_lines(capsys.readouterr().out)
+    assert len(lines["100"]) == 2
+    assert lines["100"] == lines["1000"] == lines["10000"]
+    peak = float(lines["100"][0].split()[2])
+    assert peak > 7.0                   # the reversal's overshoot (test_simulate_reversal.py), seen at any rate
+    # the Python API says the same (SimResult.summary)
+    from bldc_actuator.simulate import simulate_profile
+
+    prof = profiles.Profile([r[0] for r in rows], [r[1] for r in rows])
+    a, b = simulate_profile("ak80_9", prof, rate=100.0), simulate_profile("ak80_9", prof, rate=3000.0)
+    assert a.summary.peak_abs_i_q == pytest.approx(b.summary.peak_abs_i_q, rel=1e-9) == pytest.approx(peak, abs=1e-3)
+    assert a.summary.ticks == b.summary.ticks == 8000
+    assert np.max(np.abs(a["i_q"])) < 5.01 < a.summary.peak_abs_i_q      # the 100 Hz trace misses the overshoot
+
+
+def test_csv_time_in_milliseconds_is_an_error_unless_declared(tmp_path, capsys):
+    """Issue #25: a command CSV whose time column is in ms (0..900 in steps of 1) ran silently for 900 s (rc 0).
+    Now an error naming the column, the expected unit and the fixes; declared (--time-unit ms or a column t_ms),
+    the same file is a 0.9 s run, the same physics as the file written in seconds."""
+    ms_rows = "".join(f"{k},{5.0 if 100 <= k < 600 else 0.0}\n" for k in range(901))
+    src = tmp_path / "ms.csv"
+    src.write_text("time,current_command\n" + ms_rows)
+    out = str(tmp_path / "run")
+    assert main(["simulate", "--profile", "csv", "--input", str(src), "--out", out, "--no-plot"]) == 2
+    err = capsys.readouterr().err
+    assert "'time'" in err and "milliseconds" in err and "expected seconds" in err
+    assert "--time-unit ms" in err and "t_ms" in err and "900 s" in err
+    assert not (tmp_path / "run.csv").exists()
+    with pytest.raises(ValueError, match="looks like milliseconds"):
+        profiles.from_csv(src)
+    # declared: the option, or the header's unit (t_ms, "time [ms]")
+    a = profiles.from_csv(src, time_unit="ms")
+    (tmp_path / "t_ms.csv").write_text("t_ms,current_command\n" + ms_rows)
+    (tmp_path / "bracket.csv").write_text("time [ms],current_command\n" + ms_rows)
+    b, c = profiles.from_csv(tmp_path / "t_ms.csv"), profiles.from_csv(tmp_path / "bracket.csv")
+    assert a.duration == b.duration == c.duration == pytest.approx(0.9)
+    assert np.array_equal(a.t, b.t) and np.array_equal(a.values, c.values)
+    s_rows = "".join(f"{k / 1000!r},{5.0 if 100 <= k < 600 else 0.0}\n" for k in range(901))
+    (tmp_path / "s.csv").write_text("time,current_command\n" + s_rows)
+    assert np.allclose(profiles.from_csv(tmp_path / "s.csv").t, a.t, rtol=0, atol=1e-12)
+    assert main(["simulate", "--profile", "csv", "--input", str(src), "--time-unit", "ms", "--out", out,
+                 "--no-plot", "--preset", "ak80_9"]) == 0
+    assert "duration 0.900 s" in capsys.readouterr().out
+    # a header unit and a different --time-unit contradict each other; --time-unit s confirms seconds
+    with pytest.raises(ValueError, match="says ms"):
+        profiles.from_csv(tmp_path / "t_ms.csv", time_unit="s")
+    assert profiles.from_csv(src, time_unit="s").duration == 900.0
+    # a few sparse rows in seconds (the common hand-written profile) are not suspect
+    (tmp_path / "sparse.csv").write_text("time,current_command\n0,0\n0.05,5\n0.5,0\n1.0,0\n")
+    assert profiles.from_csv(tmp_path / "sparse.csv").duration == 1.0
+
+
+def test_absurd_commands_are_refused_by_the_nodes_rule(tmp_path, capsys):
+    """Issue #25: a 1.5e12 N*m command was accepted silently. Refused (exit 2) with the field, the limit and unit:
+    the node scheduler's rule (scheduler.absurd_limits: 10 x drive.current_limit, in current or output torque),
+    not a second one; a command between the limit and that is accepted and limited by the drive."""
+    from bldc_actuator.params import load_preset
+    from bldc_actuator.scheduler import absurd_limits
+    from bldc_actuator.simulate import simulate_profile
+
+    p = load_preset("ak80_9")
+    i_max, tau_max = absurd_limits(p)
+    assert i_max == pytest.approx(10 * p.drive.current_limit)
+    src = tmp_path / "absurd.csv"
+    src.write_text("time,torque_command\n0,0\n0.01,1.5e12\n0.02,0\n")
+    out = str(tmp_path / "run")
+    assert main(["simulate", "--profile", "csv", "--input", str(src), "--out", out, "--no-plot",
+                 "--preset", "ak80_9"]) == 2
+    err = capsys.readouterr().err
+    assert "torque_command" in err and "1.5e+12 N*m" in err and "absurd" in err
+    assert f"{tau_max:g} N*m" in err and "drive.current_limit" in err
+    assert not (tmp_path / "run.csv").exists()
+    assert main(["simulate", "--amplitude", "1e6", "--out", out, "--no-plot"]) == 2
+    err = capsys.readouterr().err
+    assert "--amplitude" in err and "current command 1e+06 A" in err and " A (10 x drive.current_limit" in err
+    with pytest.raises(ValueError, match="absurd"):
+        simulate_profile(p, profiles.step(1.5e12, 0.1, kind="torque"))
+    # just inside the node's bound: accepted, the drive limits the current to drive.current_limit
+    r = simulate_profile(p, profiles.step(0.99 * i_max, 0.02, t_step=0.005))
+    assert r.summary.peak_abs_i_q <= p.drive.current_limit * 1.1
+    assert np.max(r["i_q_ref"]) == pytest.approx(p.drive.current_limit)
+
+
+def test_tick_trace_records_every_tick_whatever_the_callers_steps():
+    """Actuator.tick_trace: stepped in uneven chunks (off the tick grid), it holds the state at every tick instant,
+    the same as an actuator stepped tick by tick and read at each (to the splitting's effect: an interval split off
+    the tick grid is integrated in two parts, ~1e-4 A here while the rotor breaks away from static friction)."""
+    from bldc_actuator.model import Actuator
+    from bldc_actuator.params import load_preset
+
+    p = load_preset("ak80_9")
+    a, b = Actuator(p, warn=False), Actuator(p, warn=False)
+    a.set_current_command(5.0), b.set_current_command(5.0)
+    tr = a.tick_trace(4)                      # grows as needed
+    tr.record_now()
+    for dt in (370_000, 1_300_000, 50_000, 1_280_000):
+        tr.step_ns(dt)
+    st = tr.states()
+    tick = int(round(1e9 / p.drive.current_loop_rate))
+    assert st["t_ns"][0] == 0 and np.all(np.diff(st["t_ns"]) == tick) and st["t_ns"][-1] == 3_000_000
+    assert a.t_ns == 3_000_000
+    ref = []
+    for _ in range(len(st)):
+        ref.append(b.state.i_q)
+        b.step_ns(tick)
+    assert np.allclose(st["i"].imag, ref, rtol=0, atol=1e-3)
+    sig = a.tick_signals(st)
+    assert np.allclose(sig["velocity_out"], st["omega"] / p.gear.gear_ratio)
+    assert np.max(sig["i_q"]) > 4.5
