@@ -9,8 +9,9 @@ Per try: ``--load`` busy-loop processes (``python -c 'while True: pass'``, nice 
 only; ``actuator_node`` starts with ``--joints`` ak80_9 joints (the 12-joint robot of docs/node.md) at real
 time; once it logs ``running`` (its loop is stepping), a second process (a plain rclpy node) starts and polls
 the graph every 20 ms until it sees the node (``get_node_names_and_namespaces``) and a publisher on
-``/joint_states`` (``count_publishers``). Printed per try: the time from the probe's ``rclpy.init`` to the
-node's name, to its publisher, and its participant discovery; then min/median/max over the tries. A try
+``/joint_states`` (``count_publishers``). Printed per try: the time from the probe's node creation to the
+node's name and to its publisher (0.0: known by its first look), and the probe's own start-up (imports,
+``rclpy.init``, node) before that; then min/median/max over the tries. A try
 that does not find them within ``--timeout`` s counts as not found.
 
 The environment: ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, ``ROS_DOMAIN_ID`` (``--domain``, default 56),
@@ -91,6 +92,12 @@ def node_command(joints: int, extra: list[str]) -> list[str]:
 def one_try(args) -> dict:
     env = env_for(args)
     busy = [subprocess.Popen([sys.executable, "-c", BUSY], env=env) for _ in range(args.load)]
+    if args.controller:   # a controller process streaming ~/commands (bench_node_floor.py's) from the start
+        sys.path.insert(0, str(HERE))
+        from bench_node_floor import CONTROLLER
+
+        busy.append(subprocess.Popen([sys.executable, "-c", CONTROLLER, str(args.joints), str(args.controller),
+                                      "sine"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
     probe_cmd = [sys.executable, "-c", PROBE, "bldc_actuator", "/joint_states", str(args.timeout)]
     early = subprocess.Popen(probe_cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) \
         if args.probe_first else None
@@ -145,6 +152,8 @@ def main() -> int:
     ap.add_argument("--delay", type=float, default=1.0, help="seconds between the node's 'running' and the probe")
     ap.add_argument("--probe-first", action="store_true",
                     help="start the probe before the node (a controller waiting for it); times from the probe's start")
+    ap.add_argument("--controller", type=float, default=0.0,
+                    help="also run a controller process sending ~/commands at this rate [Hz] (0 = none)")
     ap.add_argument("--domain", type=int, default=56, help="ROS_DOMAIN_ID of every process (default 56)")
     ap.add_argument("--profile", default=str(ROOT / "config" / "fastdds_localhost.xml"),
                     help="Fast DDS XML profile for every process; '' = none")
@@ -152,7 +161,7 @@ def main() -> int:
     ap.add_argument("--pythonpath", default="", help="run the node's bldc_actuator from this checkout")
     args = ap.parse_args()
     print(f"discovery of actuator_node ({args.joints} joints, real time) by a second process; {args.load} busy "
-          f"loop(s); profile {args.profile or 'none'}; domain {args.domain}; load average {loadavg()}; "
+          f"loop(s); controller {args.controller:g} Hz; profile {args.profile or 'none'}; domain {args.domain}; load average {loadavg()}; "
           f"{os.cpu_count()} CPUs", flush=True)
     times_node, times_pub, missed = [], [], 0
     for k in range(args.tries):
@@ -163,7 +172,8 @@ def main() -> int:
             times_node.append(r["node"])
             times_pub.append(r["publisher"])
         print(f"try {k + 1}: node {r.get('node', 'NOT FOUND')} s, /joint_states publisher "
-              f"{r.get('publisher', 'NOT FOUND')} s (load average {r['load']})", flush=True)
+              f"{r.get('publisher', 'NOT FOUND')} s after the probe's node existed (its own start-up before: "
+              f"{r['import_s']:.2f} s; load average {r['load']})", flush=True)
     for label, xs in (("node name", times_node), ("publisher", times_pub)):
         if xs:
             print(f"{label}: min {min(xs):.2f} s, median {statistics.median(xs):.2f} s, max {max(xs):.2f} s "
