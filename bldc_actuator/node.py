@@ -272,7 +272,8 @@ class ActuatorNode(Node):
         if record:
             self._open_recorder(record)
         self._type_errors: dict[str, str] = {}   # run-time values of the wrong type (see _pre_set_parameters)
-        if hasattr(self, "add_pre_set_parameters_callback"):   # (rclpy of ROS 2 Jazzy and newer)
+        # (an rclpy without pre-set callbacks refuses an integer for a double by its own type check, as before)
+        if hasattr(self, "add_pre_set_parameters_callback"):
             self.add_pre_set_parameters_callback(self._pre_set_parameters)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
@@ -596,7 +597,6 @@ class ActuatorNode(Node):
         self._type_errors = {}
         if errors:
             return SetParametersResult(successful=False, reason="; ".join(errors))
-        plist = [NP.coerce_set(p) for p in plist]   # (rclpy without pre-set callbacks: refused by type before)
         model: dict[str, Any] = {}
         node: dict[str, Any] = {}
         try:
