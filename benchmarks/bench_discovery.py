@@ -85,8 +85,9 @@ def node_command(joints: int, extra: list[str]) -> list[str]:
     ros = ["--ros-args", "-p", f"joints:=[{', '.join(names)}]"]
     for n in names:
         ros += ["-p", f"joint.{n}.preset:=ak80_9"]
+    own = [a for a in extra if a.startswith("--executor")]
     return [sys.executable, "-c", "import sys; from bldc_actuator.node import main; sys.exit(main(sys.argv))",
-            *ros, *extra]
+            *own, *ros, *[a for a in extra if a not in own]]
 
 
 def one_try(args) -> dict:
