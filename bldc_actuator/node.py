@@ -61,7 +61,7 @@ from std_msgs.msg import Empty, Float64, Float64MultiArray, MultiArrayDimension
 
 from . import node_params as NP
 from .model import COMPILED, warm_up
-from .params import SPECS, ParameterError, current_loop_warning, from_flat
+from .params import SPECS, ParameterError, current_loop_warning, from_flat, sanity_warnings
 from .plant import ActuatorPlant
 from .scheduler import Health, JointCommand, Scheduler, SchedulerConfig
 
@@ -203,10 +203,9 @@ class ActuatorNode(Node):
         except BaseException:
             self.destroy_node()
             raise
-        for name, p in joint_params.items():   # a current loop the motor can outrun diverges at speed: say so
-            msg = current_loop_warning(p)
-            if msg:
-                self.get_logger().warning(f"joint {name}: {msg}")
+        # values outside their usual range (accepted: sanity limits) and a current loop the motor can outrun
+        # (it diverges at speed): said at start-up, and the same for a value set at run time
+        self._log_sanity({name: sanity_warnings(p) for name, p in joint_params.items()})
         config = SchedulerConfig(
             period_ns=period_ns, time_factor=nv["node.time_factor"], lock_step=nv["node.lock_step"],
             watchdog_ns=int(round(nv["node.watchdog_timeout"] * 1e9)),
@@ -272,6 +271,10 @@ class ActuatorNode(Node):
         record = nv["node.record"]
         if record:
             self._open_recorder(record)
+        self._type_errors: dict[str, str] = {}   # run-time values of the wrong type (see _pre_set_parameters)
+        # (an rclpy without pre-set callbacks refuses an integer for a double by its own type check, as before)
+        if hasattr(self, "add_pre_set_parameters_callback"):
+            self.add_pre_set_parameters_callback(self._pre_set_parameters)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         if self._pending:
@@ -563,7 +566,37 @@ class ActuatorNode(Node):
 
     # ------------------------------------------------------------------------------------ parameters
 
+    def _log_sanity(self, warnings: dict[str, list[str]]) -> None:
+        """Log each joint's sanity warnings (:func:`params.sanity_warnings`); joints with the same warning
+        share one line."""
+        lines: dict[str, list[str]] = {}
+        for joint, msgs in warnings.items():
+            for msg in msgs:
+                lines.setdefault(msg, []).append(joint)
+        for msg, joints in lines.items():
+            self.get_logger().warning(f"joint {', '.join(joints)}: {msg}")
+
+    def _pre_set_parameters(self, plist: list[Parameter]) -> list[Parameter]:
+        """Before rclpy's type check: an integer for a double (``ros2 param set ... drive.bus_voltage 48``) is
+        that double, as in a parameter file; a value of another wrong type is kept back (the current value
+        stands in) and refused by :meth:`_on_set_parameters` with a message naming the field, its type, range
+        and unit."""
+        self._type_errors = {}
+        out = []
+        for p in plist:
+            p = NP.coerce_set(p)
+            err = NP.type_error(p)
+            if err is not None and self.has_parameter(p.name):
+                self._type_errors[p.name] = err
+                p = self.get_parameter(p.name)
+            out.append(p)
+        return out
+
     def _on_set_parameters(self, plist: list[Parameter]) -> SetParametersResult:
+        errors = [self._type_errors.pop(p.name) for p in plist if p.name in self._type_errors]
+        self._type_errors = {}
+        if errors:
+            return SetParametersResult(successful=False, reason="; ".join(errors))
         model: dict[str, Any] = {}
         node: dict[str, Any] = {}
         try:
@@ -575,6 +608,14 @@ class ActuatorNode(Node):
             new = [from_flat(model, base=self.plant.params(j.name)) for j in self.joints] if model else None
         except ParameterError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
+        if new is not None:   # the same sanity warnings as at start-up, for the fields set now
+            old_loop = {j.name: current_loop_warning(self.plant.params(j.name)) for j in self.joints}
+            warn = {}
+            for j, params in zip(self.joints, new):   # the fields set now, and a current-loop warning that is new
+                warn[j.name] = [m for m in sanity_warnings(params)
+                                if m.split(" ", 1)[0] in model or (m.split(" ", 1)[0] not in SPECS
+                                                                   and m != old_loop[j.name])]
+            self._log_sanity(warn)
         with self._lock:
             if new is not None:   # a node-level model parameter applies to every joint
                 for j, params in zip(self.joints, new):

@@ -173,6 +173,33 @@ def _coerce_override(node, name: str, t: type) -> None:
         ov[name] = Parameter(name, Parameter.Type.DOUBLE_ARRAY, [float(p.value)])
 
 
+def coerce_set(p: Parameter) -> Parameter:
+    """A parameter set at run time (``ros2 param set ... drive.bus_voltage 48``): an integer (or integer list)
+    for a double (list) becomes that double, as in a parameter file; anything else is returned unchanged (the
+    type and range checks follow)."""
+    spec = P.SPECS.get(p.name) or NODE_PARAMS.get(p.name)
+    if spec is None:
+        return p
+    if spec.type is float and p.type_ == Parameter.Type.INTEGER:
+        return Parameter(p.name, Parameter.Type.DOUBLE, float(p.value))
+    if spec.type is tuple and p.type_ == Parameter.Type.INTEGER_ARRAY:
+        return Parameter(p.name, Parameter.Type.DOUBLE_ARRAY, [float(v) for v in p.value])
+    return p
+
+
+def type_error(p: Parameter) -> str | None:
+    """The error for a run-time value of the wrong type, naming the field, its type, range and unit; None when
+    the type fits (rclpy's own text says only "expected 'Type.DOUBLE' got 'Type.STRING'")."""
+    spec = P.SPECS.get(p.name) or NODE_PARAMS.get(p.name)
+    if spec is None or p.type_ == ros_type(spec.type):
+        return None
+    lo, hi = getattr(spec, "limits", spec.range)[:2]
+    rng = f" in [{lo:g}, {hi:g}]" if spec.type in (int, float) and (math.isfinite(lo) or math.isfinite(hi)) else ""
+    unit = f" [{spec.unit}]" if spec.unit else ""
+    return (f"{p.name}: expected a {ros_type(spec.type).name.lower()}{rng}{unit}, got {p.value!r} "
+            f"({p.type_.name.lower()})")
+
+
 def _declare(node, name: str, t: type, default: Any, descriptor: ParameterDescriptor, unit: str) -> Any:
     _coerce_override(node, name, t)
     try:

@@ -54,6 +54,9 @@ LOG_THROTTLE_NS = 1_000_000_000
 #: at most one console line per joint about its diagnostics level per this wall time [ns]: a level that
 #: flaps is logged as it stands once this has passed (with the number of changes), never left stale
 LEVEL_LOG_MIN_NS = 1_000_000_000
+#: the time-factor warning (slips: the wall clock outran the physics) is raised by a slip and cleared only
+#: after this much wall time without one [ns]: a factor missed now and then is one WARN, not a flapping level
+PACE_HOLD_NS = 5_000_000_000
 #: commands interfaces of ``~/commands``: what one element means
 COMMANDS_INTERFACES = {"effort": "torque", "current": "current"}
 
@@ -196,6 +199,11 @@ class Scheduler:
         #: when a list: (ideal wall time, wall time after publication) [ns] of every period the clock advanced
         self.timing: list[tuple[int, int]] | None = None
         self._throttle = Throttle(LOG_THROTTLE_NS, clock)
+        # the time-factor warning with a hold (PACE_HOLD_NS): raised at a slip, its measurement window since then
+        self._pace_warn = False
+        self._pace_last_slip = 0
+        self._pace_wall0 = self._pace_sim0 = self._pace_slips = 0
+        self._pace_text = ""
         self._next_diag_ns = self.t_ns
         self._next_detail_ns = self.t_ns
         self._watchdog_check_ns: int | None = None   # earliest simulation time a watchdog can fire
@@ -254,6 +262,7 @@ class Scheduler:
         if not (time_factor >= 0.0):
             raise ValueError(f"time_factor: expected >= 0 (0 or inf = as fast as possible), got {time_factor!r}")
         self.config.time_factor = time_factor
+        self._pace_warn = False   # a new target: judged afresh
         if self._started:
             self._anchor()
 
@@ -506,6 +515,12 @@ class Scheduler:
             self.reject(known, topic, "effort_count", f"expected one effort per name ({len(names)} names, "
                         f"{len(effort)} efforts): nothing applied")
             return
+        if len(set(names)) != len(names):
+            twice = sorted({n for n in names if names.count(n) > 1})
+            self.reject([j for j in self.joints if j.name in twice], topic, "duplicate:" + ",".join(twice),
+                        f"joint(s) {', '.join(repr(n) for n in twice)} named more than once in one message: "
+                        "nothing applied (which effort is meant is ambiguous)")
+            return
         for name, value in zip(names, effort):
             j = self.by_name.get(name)
             if j is None:
@@ -524,9 +539,16 @@ class Scheduler:
         j.load_torque_extra = v
         return True
 
-    def reset_fault(self, j: JointCommand) -> None:
-        was = self.plant.reset_fault(j.name)
-        self.log.info(f"fault reset{self._for(j)}" + ("" if was else " (no trip was latched)"))
+    def reset_fault(self, j: JointCommand) -> bool:
+        """Clear a latched trip of joint ``j``; True if one was latched. Logged throttled per joint and outcome
+        (a controller that publishes resets at its own rate gets one line per :data:`LOG_THROTTLE_NS`, the
+        ones held back counted)."""
+        was = bool(self.plant.reset_fault(j.name))
+        allowed, held = self._throttle.allow(("reset_fault", j.name, was))
+        if allowed:
+            more = f" ({held} more like it in the last {LOG_THROTTLE_NS * 1e-9:g} s)" if held else ""
+            self.log.info(f"fault reset{self._for(j)}" + ("" if was else " (no trip was latched)") + more)
+        return was
 
     def update_params(self, j: JointCommand, params: ActuatorParams) -> None:
         self.plant.update_params(j.name, params)
@@ -544,6 +566,7 @@ class Scheduler:
         wall = self.clock()
         if wall > self._win_wall0 and self.t_ns > self._win_sim0:
             self.real_time_factor = (self.t_ns - self._win_sim0) / (wall - self._win_wall0)
+        self._pace(wall)
         result = [self._joint_health(j, o, error, values or {}) for j, o in zip(self.joints, outs)]
         lines: dict[tuple, list[JointCommand]] = {}   # the same change of several joints: one line
         for j, h in zip(self.joints, result):
@@ -562,6 +585,23 @@ class Scheduler:
             j.win_saturated = j.win_rejected = 0
         self._win_wall0, self._win_sim0 = wall, self.t_ns
         return result
+
+    def _pace(self, wall: int) -> None:
+        """The time-factor warning: raised by a slip in this window, held until :data:`PACE_HOLD_NS` of wall
+        time pass without one; measured (achieved factor, slips) from the window it was raised in."""
+        if self._win_slips:
+            if not self._pace_warn:
+                self._pace_warn = True
+                self._pace_wall0, self._pace_sim0, self._pace_slips = self._win_wall0, self._win_sim0, 0
+            self._pace_slips += self._win_slips
+            self._pace_last_slip = wall
+        elif self._pace_warn and wall - self._pace_last_slip >= PACE_HOLD_NS:
+            self._pace_warn = False
+        if self._pace_warn:
+            span = wall - self._pace_wall0
+            achieved = (self.t_ns - self._pace_sim0) / span if span > 0 else float("nan")
+            self._pace_text = (f"cannot keep time_factor {self.config.time_factor:g} (achieved {achieved:.2f} over "
+                               f"the last {span * 1e-9:.1f} s; {self._pace_slips} slip(s))")
 
     def _log_level(self, joints: list[JointCommand], old: int, new: int, message: str, changes: int) -> None:
         more = f" ({changes} level changes since the last line)" if changes > 1 else ""
@@ -612,10 +652,9 @@ class Scheduler:
         if error:
             level = ERROR
             why.append(error)
-        if self._win_slips:
+        if self._pace_warn:
             level = max(level, WARN)
-            why.append(f"cannot keep time_factor {cfg.time_factor:g} (achieved {self.real_time_factor:.2f}; "
-                       f"{self._win_slips} slip(s))")
+            why.append(self._pace_text)
         values = {
             "sim_time [s]": f"{self.t_ns * 1e-9:.6f}",
             "real_time_factor": f"{self.real_time_factor:.3f}",
