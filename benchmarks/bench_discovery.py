@@ -29,6 +29,7 @@ import signal
 import statistics
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -71,10 +72,11 @@ def env_for(args) -> dict:
     env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     env["ROS_DOMAIN_ID"] = str(args.domain)
     env.pop("_ROS_WHEELS_BOOTSTRAP_COMPLETE", None)
-    for var in ("FASTDDS_DEFAULT_PROFILES_FILE", "FASTRTPS_DEFAULT_PROFILES_FILE"):
-        env.pop(var, None)
-        if args.profile:
-            env[var] = str(Path(args.profile).resolve())
+    # (Fast DDS 3 reads FASTDDS_...; rmw_fastrtps warns at every start where the old FASTRTPS_... name is set)
+    env.pop("FASTRTPS_DEFAULT_PROFILES_FILE", None)
+    env.pop("FASTDDS_DEFAULT_PROFILES_FILE", None)
+    if args.profile:
+        env["FASTDDS_DEFAULT_PROFILES_FILE"] = str(Path(args.profile).resolve())
     if args.pythonpath:
         env["PYTHONPATH"] = args.pythonpath + os.pathsep + env.get("PYTHONPATH", "")
     return env
@@ -92,6 +94,8 @@ def node_command(joints: int, extra: list[str]) -> list[str]:
 
 def one_try(args) -> dict:
     env = env_for(args)
+    if args.cold_cache:   # a fresh clone's first start: the kernel compiles (numba's on-disk cache is empty)
+        env["NUMBA_CACHE_DIR"] = tempfile.mkdtemp(prefix="bench_discovery_numba_")
     busy = [subprocess.Popen([sys.executable, "-c", BUSY], env=env) for _ in range(args.load)]
     if args.controller:   # a controller process streaming ~/commands (bench_node_floor.py's) from the start
         sys.path.insert(0, str(HERE))
@@ -116,13 +120,16 @@ def one_try(args) -> dict:
     reader = threading.Thread(target=read, daemon=True)
     reader.start()
     try:
-        if not running.wait(120):
-            raise RuntimeError("the node did not start within 120 s:\n" + "".join(log))
-        load0 = loadavg()
-        if early is not None:
+        if early is not None:   # the probe looks from the node's start on, whether or not its loop runs yet
+            load0 = loadavg()
             stdout, stderr = early.communicate(timeout=args.timeout + 120)
             returncode = early.returncode
+            node_running = running.is_set()
         else:
+            if not running.wait(120):
+                raise RuntimeError("the node did not start within 120 s:\n" + "".join(log))
+            load0 = loadavg()
+            node_running = True
             time.sleep(args.delay)
             out = subprocess.run(probe_cmd, env=env, capture_output=True, text=True, timeout=args.timeout + 120)
             stdout, stderr, returncode = out.stdout, out.stderr, out.returncode
@@ -130,6 +137,7 @@ def one_try(args) -> dict:
             raise RuntimeError(f"probe failed: {stderr}")
         result = json.loads(stdout.strip().splitlines()[-1])
         result["load"] = load0
+        result["node_running_when_found"] = node_running
         return result
     finally:
         node.send_signal(signal.SIGINT)
@@ -151,6 +159,8 @@ def main() -> int:
     ap.add_argument("--joints", type=int, default=12)
     ap.add_argument("--timeout", type=float, default=60.0, help="give up a try after this many seconds")
     ap.add_argument("--delay", type=float, default=1.0, help="seconds between the node's 'running' and the probe")
+    ap.add_argument("--cold-cache", action="store_true",
+                    help="an empty numba cache for the node (a fresh clone's first start: the kernel compiles)")
     ap.add_argument("--probe-first", action="store_true",
                     help="start the probe before the node (a controller waiting for it); times from the probe's start")
     ap.add_argument("--controller", type=float, default=0.0,
@@ -174,7 +184,8 @@ def main() -> int:
             times_pub.append(r["publisher"])
         print(f"try {k + 1}: node {r.get('node', 'NOT FOUND')} s, /joint_states publisher "
               f"{r.get('publisher', 'NOT FOUND')} s after the probe's node existed (its own start-up before: "
-              f"{r['import_s']:.2f} s; load average {r['load']})", flush=True)
+              f"{r['import_s']:.2f} s; load average {r['load']}; the node's loop "
+              f"{'running' if r['node_running_when_found'] else 'not yet running: kernel compiling'} then)", flush=True)
     for label, xs in (("node name", times_node), ("publisher", times_pub)):
         if xs:
             print(f"{label}: min {min(xs):.2f} s, median {statistics.median(xs):.2f} s, max {max(xs):.2f} s "

@@ -192,6 +192,20 @@ class ActuatorNode(Node):
             self.destroy_node()
             raise
         self.node_values = nv
+        # the robot's topics first: a first compile of the kernel (below) takes 8 s of CPU, a minute and more on a
+        # busy machine, and the node and its joint_states, diagnostics and command topics are discoverable all
+        # that time (the middleware's threads do not need this one); they carry data once the loop runs
+        qos = QoSProfile(depth=10)
+        self._qos = qos
+        self.pub_joint = self.create_publisher(JointState, nv["node.joint_states_topic"], qos)
+        self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", qos)
+        self.pub_clock = self.create_publisher(ClockMsg, "/clock", qos) if nv["node.publish_clock"] else None
+        # deep command queues: in lock-step mode every command counts (one period each), even in bursts
+        cq = self._cq = QoSProfile(depth=COMMAND_QUEUE_DEPTH)
+        self.sub_commands = self.create_subscription(Float64MultiArray, "~/commands", self._on_commands, cq)
+        topic = nv["node.joint_commands_topic"]
+        self.sub_joint_commands = self.create_subscription(JointState, topic, self._on_joint_commands, cq) \
+            if topic else None
         # compile (or load from numba's cache) the physics kernel now, before simulation time is tied to the
         # wall clock: a first step that compiles would otherwise be a slip of seconds
         self.kernel_warm_up_s = warm_up()
@@ -221,13 +235,6 @@ class ActuatorNode(Node):
         self.topics = [JointTopics(j.name, self._stamp_now, f"~/{j.name}/" if self.multi else "~/")
                        for j in self.joints]
 
-        qos = QoSProfile(depth=10)
-        self._qos = qos
-        self.pub_joint = self.create_publisher(JointState, nv["node.joint_states_topic"], qos)
-        self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", qos)
-        self.pub_clock = self.create_publisher(ClockMsg, "/clock", qos) if nv["node.publish_clock"] else None
-        # deep command queues: in lock-step mode every command counts (one period each), even in bursts
-        cq = self._cq = QoSProfile(depth=COMMAND_QUEUE_DEPTH)
         self._detail_all: list = []   # (joint index, publisher, fill) of every detail publisher created
         self._detail_live: list = []
         self._next_detail_refresh = 0
@@ -243,13 +250,9 @@ class ActuatorNode(Node):
                                           k, topic))
                 else:
                     self._create_joint_entity(k, topic)
-        self.sub_commands = self.create_subscription(Float64MultiArray, "~/commands", self._on_commands, cq)
-        topic = nv["node.joint_commands_topic"]
-        self.sub_joint_commands = self.create_subscription(JointState, topic, self._on_joint_commands, cq) \
-            if topic else None
         # resolved names, looked up once (a topic_name property call per message costs)
         self._commands_topic = self.sub_commands.topic_name
-        self._joint_commands_topic = self.sub_joint_commands.topic_name if topic else ""
+        self._joint_commands_topic = self.sub_joint_commands.topic_name if self.sub_joint_commands else ""
 
         # reusable messages (rclpy serialises at publish; reuse is safe): the JointState shares the
         # scheduler's position/velocity/effort arrays and the period stamp, so a period changes no field

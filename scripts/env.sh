@@ -7,7 +7,6 @@ VENV="$(bash "$REPO/scripts/setup_env.sh")"
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 # ...and keep the DDS sockets on loopback (LOCALHOST alone binds them to 0.0.0.0 and the external interface)
 export FASTDDS_DEFAULT_PROFILES_FILE="$REPO/config/fastdds_localhost.xml"
-export FASTRTPS_DEFAULT_PROFILES_FILE="$FASTDDS_DEFAULT_PROFILES_FILE"
 # The venv's interpreter bootstraps its own LD_LIBRARY_PATH; drop another ROS-wheels venv's state.
 if [[ -n "${_ROS_WHEELS_BOOTSTRAP_COMPLETE:-}" ]]; then
     unset _ROS_WHEELS_BOOTSTRAP_COMPLETE LD_LIBRARY_PATH

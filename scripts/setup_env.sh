@@ -80,6 +80,9 @@ run "$VENV/bin/python" -m pip install --upgrade pip
 run "$VENV/bin/python" -m pip install -e "$REPO[wheels,test]"
 # smoke test: the package, rclpy (through the wheels' bootstrapper) and colcon are usable
 run "$VENV/bin/python" -c 'import bldc_actuator, rclpy, numpy, scipy, yaml, mcap, pytest'
+# compile the physics kernel into numba's on-disk cache now (8 s of CPU): a first node start, test or demo
+# would otherwise compile it (a minute and more on a busy machine, during which the node's loop cannot run)
+run "$VENV/bin/python" -c 'from bldc_actuator.model import warm_up; warm_up()'
 touch "$STAMP"
 echo "setup_env.sh: done in $((SECONDS - start)) s" >&2
 echo "$VENV"

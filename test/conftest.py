@@ -42,7 +42,6 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 # and the external interface (docs/node.md, "DDS on loopback"). Inherited by the processes tests start.
 FASTDDS_PROFILE = REPO_ROOT / "config" / "fastdds_localhost.xml"
 os.environ["FASTDDS_DEFAULT_PROFILES_FILE"] = str(FASTDDS_PROFILE)   # Fast DDS 3 (Kilted wheels)
-os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(FASTDDS_PROFILE)  # its name up to Fast DDS 2
 PACKAGE = "bldc_actuator"
 
 # ROS domain ids used by tests: DOMAIN_ID_BASE..DOMAIN_ID_MAX (101 is the last id whose DDS ports stay

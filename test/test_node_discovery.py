@@ -140,3 +140,32 @@ def test_the_transport_profile_keeps_the_listening_sockets_on_loopback():
     bare.pop("FASTRTPS_DEFAULT_PROFILES_FILE", None)
     without = listening(bare)
     assert without and not all(a.startswith("127.0.0.1:") for a in without), without   # what the profile fixes
+
+
+def test_the_robot_topics_exist_while_the_kernel_compiles(ros_context, monkeypatch):
+    """The issue's undiscoverable node was a first start: numba compiles the kernel (8 s of CPU, 116 s of wall
+    time at load 14, `bench_discovery.py --cold-cache --probe-first`) and the node created its publishers only
+    after that, so a second process found the node's name but no /joint_states for two minutes. Whatever the
+    compile costs, joint_states, diagnostics and the command topics exist before it starts: here, at the moment
+    the node asks for the kernel, the graph (the same context, no discovery delay) shows them."""
+    from rclpy.node import Node
+
+    import bldc_actuator.node as node_module
+    from bldc_actuator.node import ActuatorNode
+
+    probe = Node("compile_probe", context=ros_context)
+    seen = {}
+
+    def warm_up_seen_from_the_graph() -> float:
+        seen["joint_states publishers"] = probe.count_publishers("/joint_states")
+        seen["diagnostics publishers"] = probe.count_publishers("/diagnostics")
+        seen["commands subscriptions"] = probe.count_subscribers("/bldc_actuator/commands")
+        return 0.0
+
+    monkeypatch.setattr(node_module, "warm_up", warm_up_seen_from_the_graph)
+    node = ActuatorNode(context=ros_context, start=False)
+    try:
+        assert seen == {"joint_states publishers": 1, "diagnostics publishers": 1, "commands subscriptions": 1}
+    finally:
+        node.destroy_node()
+        probe.destroy_node()
