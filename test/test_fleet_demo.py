@@ -42,7 +42,7 @@ def demo_files(tmp_path_factory):
     from bldc_actuator.demo import run_demo
 
     root = tmp_path_factory.mktemp("demo_fleet")
-    run_demo(None, root / "run", domain_id=next_domain_id(), plot=False, quiet=True)
+    run_demo("ak80_9", root / "run", domain_id=next_domain_id(), plot=False, quiet=True)
     files = []
     for k in (1, 2, 3):
         d = root / f"demo{k}"

@@ -8,6 +8,8 @@ Examples::
 
 Writes ``OUT/fleet.parquet`` and ``OUT/fleet.csv`` (one row per recording x joint x parameter),
 ``OUT/alerts.json`` (trend alerts, every tested series, failures) and ``OUT/report.html``.
+Exit status: 0 done (failed files are reported in the outputs), 1 none of the files could be diagnosed,
+2 bad input (an option, a pattern that matches nothing, a parameter file that does not validate).
 Without ``--scheduler`` a local Dask cluster of ``--workers`` processes runs on this machine; with it,
 the workers of that cluster must have bldc_actuator installed and see the files at the same paths.
 """
@@ -214,7 +216,8 @@ def main(args) -> int:
                "recordings_per_minute": 60.0 * recordings / res.seconds if res.seconds > 0 else None,
                "recordings_with_data_issues": len(issues)}
     doc = {"summary": summary, "options": ev["options"],
-           "tests": {"off_nominal": "latest value vs reference: > tolerance AND > k_sigma combined sd",
+           "tests": {"off_nominal": "latest value vs reference: > tolerance AND > k_sigma combined sd AND the "
+                                    "change supported by diagnose's finding rule (row field supported)",
                      "drifting": "weighted (1/sd^2) straight line vs time, slope / se > t quantile at alpha; "
                                  "se inflated by the fleet's pooled over-dispersion of the stated sd",
                      "shifted": ">= 8 recordings: robust z of median(recent) - median(baseline), calibrated "
