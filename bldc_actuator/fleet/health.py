@@ -23,8 +23,9 @@ resistance`` (K/W)             thermal_response``) output error,   changes by >=
 
 Estimator (well defined, the same for every recording):
 
-1. :func:`..diagnosis.frame.equation_error.prepare` with the nominal parameters (same filter, decimation and
-   held-out blocks as ``diagnose``).
+1. :func:`prepare`: :func:`..diagnosis.frame.equation_error.prepare` with the nominal parameters (same filter,
+   decimation and held-out blocks as ``diagnose``) and the search stage's alignment of the logged current to
+   the motion, as ``diagnose`` does.
 2. ONE joint least-squares fit (:func:`..diagnosis.frame.selection.fit_model`: instrumental variables for
    current-proportional columns, fixed-point K_t column) of the four linear columns that are checkable
    plus the always-fitted nuisance columns, each equation weighted by 1/robust std of its nominal training
@@ -34,7 +35,10 @@ Estimator (well defined, the same for every recording):
    time-cluster sandwich of :func:`cluster_covariance` (coloured, model-form residuals).
 4. Held-out before/after per parameter: held-out RMS of that parameter's equation, in its own unit, with the
    other tracked parameters fitted and this one at nominal (before) vs all fitted (after).
-5. R_ha: 1-parameter nonlinear least squares of ``log(R_ha/R_ha,nom)`` on the training part of the
+5. Support (:func:`support`): does the change from nominal pass the rule a ``diagnose`` finding must pass
+   (the forward selection's gate on "this parameter fitted" vs "at nominal", then the significance judge; for
+   R_ha the held-out temperature gain and the significance judge)? An off-nominal alert needs it.
+6. R_ha: 1-parameter nonlinear least squares of ``log(R_ha/R_ha,nom)`` on the training part of the
    recorded temperatures simulated from the measured current (both nodes' start temperatures
    fitted as nuisances around the first recorded samples: a start pinned to one noisy sample biased R_ha by
    up to 1 % at a stated 0.08 %); uncertainty from the Jacobian, inflated by the residual's correlation time; held-out =
