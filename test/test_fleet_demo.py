@@ -194,3 +194,40 @@ def test_shutdown_ends_worker_processes_a_failed_close_left_behind():
     finally:
         if proc.poll() is None:
             proc.kill()
+
+
+@pytest.mark.slow
+def test_the_finding_rule_supports_a_real_change_and_refuses_none(tmp_path):
+    """The rule can pass: one output-side CSV log of an actuator whose friction is +50 % and R_ha +30 % off the
+    parameter file: both tracked changes are supported (an off-nominal alert follows); the same log of the
+    nominal actuator: no change is supported."""
+    from benchmarks import fleet_gen as G
+    from bldc_actuator.diagnosis.io.cleaning import clean
+    from bldc_actuator.diagnosis.io.loaders import load
+    from bldc_actuator.fleet.health import track
+
+    import numpy as np
+
+    nominal = G.nominal_params()
+    base = G.true_params(nominal, G.Unit("r/j", "output_csv"), 0, 30, np.random.default_rng(5)).replace(**{
+        "effects.coulomb_friction": nominal.effects.coulomb_friction,
+        "thermal.housing_to_ambient_resistance": nominal.thermal.housing_to_ambient_resistance,
+        "motor.torque_constant_q": nominal.motor.torque_constant_q,
+        "motor.viscous_damping": nominal.motor.viscous_damping})
+    off = base.replace(**{"effects.coulomb_friction": 1.5 * nominal.effects.coulomb_friction,
+                          "thermal.housing_to_ambient_resistance": 1.3 * nominal.thermal.housing_to_ambient_resistance})
+    got = {}
+    for name, p in (("nominal", base), ("off", off)):
+        G.write_output_csv(tmp_path / f"{name}.csv", G.simulate(p, 15.0, 250.0, np.random.default_rng(7)))
+        sig = clean(load(tmp_path / f"{name}.csv", params=nominal), params=nominal)
+        got[name] = {t.parameter: t for t in track(sig, nominal)}
+    for par in ("coulomb_friction", "housing_to_ambient_resistance"):
+        t = got["off"][par]
+        assert t.supported, (par, t.value, t.support)
+        assert t.support.startswith("passed")
+    rows = [dict(_row(t.value, t.uncertainty, t.nominal), parameter=t.parameter, supported=t.supported,
+                 support=t.support) for t in got["off"].values() if t.status == "ok"]
+    alerted = {a["parameter"] for a in A.evaluate(rows)["alerts"]}
+    assert {"coulomb_friction", "housing_to_ambient_resistance"} <= alerted, alerted
+    assert not [t.parameter for t in got["nominal"].values() if t.supported], \
+        {t.parameter: t.support for t in got["nominal"].values()}
