@@ -12,6 +12,15 @@ default alpha and at alpha = 0.05 (where enough alarms are expected to check the
     python benchmarks/bench_fleet.py --stable --out /tmp/bench_stable --actuators 24 --days 10 --workers 2 \
         --tracked-only [--loop closed]
 
+False alarms on CORRECT models (issue #25): N short noise-free logs whose true parameters are exactly the
+parameter file's (no unit-to-unit spread, no drift), optionally with K demo recordings of the unmodified ak80_9
+(``bldc-actuator demo``; needs rclpy), through ONE ``bldc-actuator fleet`` run (full diagnosis unless
+``--tracked-only``). Every alert is a false alarm; prints their number (should be 0) and how many tracked values
+were beyond the tolerance and k sd but not supported by the finding rule (the alerts the rule refused):
+
+    python benchmarks/bench_fleet.py --false-alarm --out /tmp/bench_fa --actuators 12 --days 1 --duration 4 \
+        --noise 0 --loop closed --demo 3 --workers 2
+
 The machine's load matters (the figures are wall-clock): the script prints ``os.getloadavg()``.
 """
 
@@ -58,9 +67,15 @@ def main(argv=None) -> int:
     ap.add_argument("--reuse", action="store_true", help="reuse a fleet already generated in OUT/fleet")
     ap.add_argument("--stable", action="store_true", help="measure the false-alarm rate on a stable fleet")
     ap.add_argument("--loop", choices=("open", "closed"), default="open")
+    ap.add_argument("--false-alarm", action="store_true",
+                    help="alerts on short logs of CORRECT models (and --demo K demo recordings): should be 0")
+    ap.add_argument("--noise", type=float, default=1.0, help="--false-alarm: sensor noise scale (0: noise-free)")
+    ap.add_argument("--demo", type=int, default=0, help="--false-alarm: add K demo recordings of the unmodified ak80_9")
     ap.add_argument("--evaluate-only", action="store_true",
                     help="--stable: re-evaluate the alerts of an existing OUT/out_stable/fleet.parquet (no run)")
     a = ap.parse_args(argv)
+    if a.false_alarm:
+        return false_alarm(a)
     if a.stable:
         return stable(a)
     root = a.out / "fleet"
@@ -153,6 +168,71 @@ def stable(a) -> int:
         print(f"alpha {alpha:g}: {anyc} alert(s) in {n} series-runs ({anyc / n:.4f} per series and run); drifting "
               f"{drift} ({drift / n:.4f}, nominal alpha {alpha:g})")
     return 0
+
+
+#: the fields fleet_gen spreads from unit to unit: pinned to the parameter file's values (a CORRECT model)
+SPREAD_FIELDS = ("effects.coulomb_friction", "thermal.housing_to_ambient_resistance", "motor.torque_constant_q",
+                 "motor.viscous_damping")
+
+
+def false_alarm(a) -> int:
+    """Short logs of correct models (+ demo recordings) through one fleet run; every alert is a false alarm."""
+    import shutil
+    import subprocess
+
+    root = a.out / "fleet"
+    if root.exists() and not a.reuse:
+        shutil.rmtree(root)
+    if not (a.reuse and (root / "truth.json").exists()):
+        nominal = G.nominal_params().to_flat()
+        pinned = {f: (nominal[f],) for f in SPREAD_FIELDS}
+        units = [G.Unit(u.actuator_id, u.fmt, None, u.joint_index, schedule=pinned)
+                 for u in G.default_units(a.actuators)]
+        t0 = time.perf_counter()
+        truth = G.generate(root, days=a.days, duration=a.duration, rate=a.rate, units=units, loop=a.loop,
+                           noise=a.noise)
+        print(f"generated {truth['files']} files ({a.actuators} actuators x {a.days} day(s), true = nominal, {a.loop} "
+              f"loop, noise x{a.noise:g}, {a.duration:g} s at {a.rate:g} Hz) in {time.perf_counter() - t0:.0f} s")
+        for k in range(a.demo):
+            d = root / "demo" / f"run{k + 1}"
+            if k == 0:   # the demo runs lock-step (reproducible): one run, copied
+                env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+                env.setdefault("ROS_DOMAIN_ID", "64")
+                subprocess.run([sys.executable, "-m", "bldc_actuator.cli", "demo", "--preset", "ak80_9", "--out",
+                                str(d), "--no-plot"], check=True, env=env, stdout=subprocess.DEVNULL, timeout=600)
+            else:
+                d.mkdir(parents=True)
+                shutil.copy(root / "demo" / "run1" / "demo.mcap", d / "demo.mcap")
+    pmap = a.out / "params_map.yaml"
+    pmap.write_text(f"'*demo*': {HERE.parent / 'config' / 'ak80_9.yaml'}\n'*': {root / 'params.yaml'}\n")
+    out = a.out / "out_false_alarm"
+    extra = ["--tracked-only"] if a.tracked_only else []
+    w = int(a.workers.split(",")[-1])
+    print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPU(s) at the start")
+    t0 = time.perf_counter()
+    rc = cli(["fleet", str(root / "**" / "*.mcap"), str(root / "**" / "*.csv"), "--params-map", str(pmap),
+              "--out", str(out), "--workers", str(w), "--no-progress", *extra])
+    secs = time.perf_counter() - t0
+    if rc != 0:
+        print(f"fleet run failed ({rc})")
+        return rc
+    doc = json.loads((out / "alerts.json").read_text())
+    kinds = {k: sum(k in x["kinds"] for x in doc["alerts"]) for k in ("off_nominal", "drifting", "shifted")}
+    refused = [s for s in doc["series"] if (s["off_nominal"]["latest"] or {}).get("beyond_tolerance_and_sigma")
+               and not s["off_nominal"]["latest"]["off"]]
+    demo = [s for s in doc["series"] if "demo" in s["actuator_id"]]
+    print(f"{doc['summary']['recordings']} recording x joint ({a.demo} demo file(s), {len(demo)} demo series), {len(doc['series'])} "
+          f"series, {len(doc['failures'])} failure(s), {secs:.0f} s, load average {os.getloadavg()[0]:.2f} at the end")
+    print(f"FALSE ALARMS: {len(doc['alerts'])} (off_nominal {kinds['off_nominal']}, drifting {kinds['drifting']}, "
+          f"shifted {kinds['shifted']}); beyond tolerance and {doc['options']['k_sigma']:g} sd but not supported "
+          f"by the finding rule (refused): {len(refused)}")
+    for x in doc["alerts"]:
+        print(f"  ALERT {x['message']}")
+    for s in refused:
+        o = s["off_nominal"]["latest"]
+        print(f"  refused {s['actuator_id']} {s['parameter']} {s['last']['value']:.4g} ± {s['last']['sd']:.2g} "
+              f"({100 * o['relative']:+.0f} %, {abs(o['z']):.0f} sd): {o['support'][:120]}")
+    return 0 if not doc["alerts"] else 1
 
 
 if __name__ == "__main__":

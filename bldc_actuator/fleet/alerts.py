@@ -9,7 +9,11 @@ of alert, each with its evidence; one alert record per series that raises any of
                  with the same parameter file of their first recordings; its unit-to-unit spread joins the
                  uncertainty) -- by more than the tolerance (relative, default 10 %, per parameter
                  overridable) AND by more than ``k_sigma`` (default 5) combined uncertainties
-                 ``sqrt(F^2 u_i^2 + u_ref^2)``. From the first recording.
+                 ``sqrt(F^2 u_i^2 + u_ref^2)``, AND that recording's change is supported the way a ``diagnose``
+                 finding must be (row field ``supported``: diagnose's own verdict where it ran, else the same
+                 selection gate and significance judge on the tracked fit, :func:`.health.support`; a value the
+                 held-out data does not support is never an alert, however many sd it is off). From the first
+                 recording.
 ``drifting``     weighted least squares of value vs time (weights ``1/u_i^2``); slope ``b`` with
                  ``se(b) = F / sqrt(sum w_i (t_i - t_w)^2)``; alert when ``|b| / se(b) > t_{1-alpha/2}(D)``.
                  From three recordings. ``F^2 = max(1, B^2)`` is the over-dispersion of the stated
@@ -69,6 +73,8 @@ class Point:
     recording: str
     status: str = "ok"
     issues: str = ""
+    supported: bool = True      #: the change passes diagnose's finding rule (rows without the field: True)
+    support: str = ""
 
     def brief(self) -> dict[str, Any]:
         return {"start_time": self.start_time, "value": self.value, "sd": self.sd, "recording": self.recording}
@@ -238,7 +244,8 @@ def evaluate(rows: list[dict], options: Options | None = None) -> dict[str, Any]
     for key, rs in by_key.items():
         ps = [Point(r["start_time"], (dt.datetime.fromisoformat(r["start_time"]) - t0).total_seconds() / 86400.0,
                     float(r["value"]), float(r["uncertainty"]), r["recording"], r.get("status", "ok"),
-                    str(r.get("data_issues") or "")) for r in rs]
+                    str(r.get("data_issues") or ""), _bool(r.get("supported", True)), str(r.get("support") or ""))
+              for r in rs]
         pts[key] = sorted(ps, key=lambda p: (p.t_days, p.recording))
     arr = {k: (np.array([p.t_days for p in ps]), np.array([p.value for p in ps]), np.array([p.sd for p in ps]))
            for k, ps in pts.items()}
@@ -277,8 +284,10 @@ def evaluate(rows: list[dict], options: Options | None = None) -> dict[str, Any]
             comb = math.sqrt((P["F"] * p.sd) ** 2 + (u_ref if math.isfinite(u_ref) else 0.0) ** 2)
             dev = p.value - ref
             z = dev / comb if comb > 0 else math.inf
+            beyond = bool(abs(z) > opt.k_sigma and abs(dev) > tol * abs(ref))
             off.append({"z": z, "relative": dev / abs(ref) if ref else math.inf,
-                        "off": bool(abs(z) > opt.k_sigma and abs(dev) > tol * abs(ref))})
+                        "off": beyond and p.supported, "beyond_tolerance_and_sigma": beyond,
+                        "supported": p.supported, "support": p.support})
         last_off = off[-1] if off and off[-1] else None
         shift = trends.shift_test(t, v, u, alpha=opt.alpha, min_change=opt.min_change) if len(v) >= 8 else \
             {"tested": False, "alert": False, "reason": f"{len(v)} recordings; the shift test needs >= 8"}
@@ -310,6 +319,13 @@ def evaluate(rows: list[dict], options: Options | None = None) -> dict[str, Any]
         if kinds:
             alerts.append(rec)
     return {"alerts": alerts, "series": series_out, "pool": pool, "options": asdict(opt)}
+
+
+def _bool(x) -> bool:
+    """A ``supported`` cell: a bool, or its text from a CSV table (empty: no evidence either way -> True)."""
+    if isinstance(x, str):
+        return x.strip().lower() not in ("false", "0", "no")
+    return True if x is None else bool(x)
 
 
 def _float(x) -> float:

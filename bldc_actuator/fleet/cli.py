@@ -8,6 +8,8 @@ Examples::
 
 Writes ``OUT/fleet.parquet`` and ``OUT/fleet.csv`` (one row per recording x joint x parameter),
 ``OUT/alerts.json`` (trend alerts, every tested series, failures) and ``OUT/report.html``.
+Exit status: 0 done (failed files are reported in the outputs), 1 none of the files could be diagnosed,
+2 bad input (an option, a pattern that matches nothing, a parameter file that does not validate).
 Without ``--scheduler`` a local Dask cluster of ``--workers`` processes runs on this machine; with it,
 the workers of that cluster must have bldc_actuator installed and see the files at the same paths.
 """
@@ -70,7 +72,7 @@ def write_table(rows: list[dict], out: Path) -> None:
     for c in COLUMNS:
         if c in floats:
             data[c] = pa.array([_float(r.get(c)) for r in rows], type=pa.float64())
-        elif c == "accepted":
+        elif c in ("accepted", "supported"):
             data[c] = pa.array([bool(r.get(c, False)) for r in rows], type=pa.bool_())
         else:
             data[c] = pa.array([str(r.get(c, "")) for r in rows], type=pa.string())
@@ -117,6 +119,24 @@ def options_from(args):
                    min_change=args.min_change)
 
 
+def validate_params(files: list[tuple[str, str]]) -> None:
+    """Load every nominal parameter file once before any work is sent out: a file that does not validate is
+    a ValueError naming the option, the field, its expected range and unit (:class:`..params.ParameterError`),
+    instead of a failure per recording on the workers."""
+    from ..params import ParameterError, load_yaml
+
+    for what, f in files:
+        try:
+            load_yaml(f)
+        except ParameterError as exc:
+            raise ValueError(f"{what}: invalid parameter file: {exc}") from None
+
+
+#: exit codes: 0 done (some recordings may have failed, reported), 1 nothing could be diagnosed, 2 bad input
+EXIT_NOTHING_DIAGNOSED = 1
+EXIT_USAGE = 2
+
+
 def _float(x):
     try:
         x = float(x)
@@ -153,6 +173,8 @@ def main(args) -> int:
         pmap = discover.load_params_map(args.params_map) if args.params_map else []
         if args.params and not args.params.exists():
             raise ValueError(f"--params {args.params}: no such file")
+        validate_params([("--params", str(args.params))] if args.params else
+                        [(f"--params-map {args.params_map}: {pat}", f) for pat, f in pmap])
         if args.workers is not None and args.workers < 1:
             raise ValueError(f"--workers: expected >= 1, got {args.workers}")
         if not 0 < args.alpha < 0.5:
@@ -160,7 +182,10 @@ def main(args) -> int:
         opts = options_from(args)
     except ValueError as exc:
         print(f"bldc-actuator fleet: {exc}", file=sys.stderr)
-        return 2
+        return EXIT_USAGE
+    if not items:
+        print(f"bldc-actuator fleet: no files match {' '.join(args.patterns)}", file=sys.stderr)
+        return EXIT_USAGE
     jobs = [Job(i.path, i.root, str(args.params) if args.params else None, pmap, args.profile,
                 str(args.mapping) if args.mapping else None, not args.tracked_only, args.holdout) for i in items]
     where = args.scheduler or f"local cluster, {args.workers or 'CPU-count'} worker process(es)"
@@ -170,7 +195,7 @@ def main(args) -> int:
     except (OSError, TimeoutError) as exc:
         print(f"bldc-actuator fleet: cannot reach the Dask scheduler {args.scheduler or '(local)'}: {exc}",
               file=sys.stderr)
-        return 2
+        return EXIT_USAGE
     out = args.out
     out.mkdir(parents=True, exist_ok=True)
     rows = sorted(res.rows, key=lambda r: (r["actuator_id"], r["start_time"], r["recording"], str(r.get("joint") or ""),
@@ -191,7 +216,8 @@ def main(args) -> int:
                "recordings_per_minute": 60.0 * recordings / res.seconds if res.seconds > 0 else None,
                "recordings_with_data_issues": len(issues)}
     doc = {"summary": summary, "options": ev["options"],
-           "tests": {"off_nominal": "latest value vs reference: > tolerance AND > k_sigma combined sd",
+           "tests": {"off_nominal": "latest value vs reference: > tolerance AND > k_sigma combined sd AND the "
+                                    "change supported by diagnose's finding rule (row field supported)",
                      "drifting": "weighted (1/sd^2) straight line vs time, slope / se > t quantile at alpha; "
                                  "se inflated by the fleet's pooled over-dispersion of the stated sd",
                      "shifted": ">= 8 recordings: robust z of median(recent) - median(baseline), calibrated "
@@ -221,4 +247,9 @@ def main(args) -> int:
     for f in res.failures:
         print(f"  FAILED {f['recording']}{' [' + str(f['joint']) + ']' if f.get('joint') else ''}: {f['error'][:200]}")
     print(f"wrote {out / 'fleet.parquet'}, {out / 'fleet.csv'}, {out / 'alerts.json'}, {out / 'report.html'}")
+    diagnosed = {r["recording"] for r in rows if r.get("status") != "failed"}
+    if not diagnosed:
+        print(f"bldc-actuator fleet: none of the {res.files} file(s) could be diagnosed ({len(res.failures)} "
+              f"failure(s), listed above and in {out / 'alerts.json'})", file=sys.stderr)
+        return EXIT_NOTHING_DIAGNOSED
     return 0

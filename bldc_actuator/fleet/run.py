@@ -14,7 +14,10 @@ recording; ``finding``: a parameter of an effect ``diagnose`` accepted), ``effec
 ``heldout_metric``, ``accepted`` (``diagnose`` accepted this effect in this recording), ``diagnosis`` (what
 ``diagnose`` said about this parameter's effect in this recording: ``accepted: value +- sd``, ``not found: why``
 (tested, no evidence), a verdict such as ``not_identifiable: why``; empty when it did not test it), ``diagnose_value``,
-``diagnose_uncertainty`` (the value +- sd ``diagnose`` fitted for this parameter when it accepted it), ``status`` (``ok``; ``warning``: the value
+``diagnose_uncertainty`` (the value +- sd ``diagnose`` fitted for this parameter when it accepted it), ``supported``
+(the change from nominal passes the rule a ``diagnose`` finding must pass: ``diagnose``'s own verdict on this effect
+in this recording where it ran and tested it, else the same gate and significance judge on the tracked fit,
+:func:`.health.support`; an off-nominal alert needs it), ``support`` (that rule's verdict in words), ``status`` (``ok``; ``warning``: the value
 stands but the recording has a data issue of :data:`SERIOUS_ISSUES`; ``not_checkable``, ``not_identifiable``,
 ``failed``), ``reason``, ``data_issues`` (every data issue of the recording, ``kind channel: detail``, also
 an unfinalized MCAP), ``profile`` (the input profile that read the file, given or auto-detected),
@@ -36,7 +39,8 @@ from typing import Any
 
 COLUMNS = ("recording", "joint", "actuator_id", "start_time", "start_time_source", "source", "effect",
            "parameter", "value", "uncertainty", "unit", "nominal", "heldout_before", "heldout_after",
-           "heldout_metric", "accepted", "diagnosis", "diagnose_value", "diagnose_uncertainty", "status", "reason", "data_issues", "profile", "params_file")
+           "heldout_metric", "accepted", "diagnosis", "diagnose_value", "diagnose_uncertainty", "supported", "support", "status", "reason", "data_issues", "profile",
+           "params_file")
 
 #: DataIssue kinds that make a recording's values less trustworthy: its rows get status ``warning``
 #: (``constant``: a fixed bus voltage or a joint at rest is listed in ``data_issues`` but is no warning)
@@ -166,9 +170,9 @@ def _process_joint(job: Job, joint, mapping) -> tuple[list[dict], list[dict]]:
     if route(sig) == TORQUE_BALANCE:
         res = torque_balance.diagnose(sig, params, holdout=job.holdout)
         return _with_issues(_torque_balance_rows(base, res), serious), []
-    from ..diagnosis.frame import equation_error as ee
+    from .health import prepare
 
-    ctx = ee.prepare([(sig, False)], params, holdout=job.holdout)
+    ctx = prepare(sig, params, holdout=job.holdout)
     failures = []
     tracked, report = [], None
     try:
@@ -249,11 +253,12 @@ def _rows(base: dict, tracked: list, report: dict | None, params) -> list[dict]:
     rows, names = [], set()
     for t in tracked:
         dv, du = fitted.get(t.parameter, (float("nan"), float("nan")))
+        ok, why = supported(t, t.effect in accepted, said.get(t.effect, ""))
         rows.append(dict(base, source="tracked", effect=t.effect, parameter=t.parameter, value=t.value,
                          uncertainty=t.uncertainty, unit=t.unit, nominal=t.nominal, heldout_before=t.heldout_before,
                          heldout_after=t.heldout_after, heldout_metric=t.heldout_metric,
                          accepted=t.effect in accepted, diagnosis=said.get(t.effect, ""), diagnose_value=dv,
-                         diagnose_uncertainty=du, status=t.status, reason=t.reason))
+                         diagnose_uncertainty=du, supported=ok, support=why, status=t.status, reason=t.reason))
         names.add(t.parameter)
     flat = params.to_flat() if params is not None else {}
     for f in findings:
@@ -271,9 +276,22 @@ def _rows(base: dict, tracked: list, report: dict | None, params) -> list[dict]:
                              heldout_before=_f(ho.get("before")), heldout_after=_f(ho.get("after")),
                              heldout_metric=str(ho.get("metric", "")) + (f" [{ho['unit']}]" if ho.get("unit") else ""),
                              accepted=True, diagnosis=said.get(f["effect"], ""), diagnose_value=_f(value),
-                             diagnose_uncertainty=_f(unc.get(name)), status="ok",
+                             diagnose_uncertainty=_f(unc.get(name)), supported=True, support="accepted by diagnose",
+                             status="ok",
                              reason="" if fields.get(name) in flat else "no nominal field for this parameter"))
     return rows
+
+
+def supported(t, accepted: bool, said: str) -> tuple[bool, str]:
+    """ONE finding rule for a tracked change: where ``diagnose`` ran on this recording and tested this effect
+    (``said`` non-empty), its verdict (accepted: supported; anything else -- not found, not identifiable, not
+    confirmed in simulation -- not); otherwise the tracked fit's own verdict from the same gate and judges
+    (:func:`.health.support`)."""
+    if accepted:
+        return True, "accepted by diagnose: " + said.removeprefix("accepted: ")
+    if said:
+        return False, "diagnose: " + said
+    return bool(t.supported), t.support
 
 
 def _torque_balance_rows(base: dict, res) -> list[dict]:
@@ -288,7 +306,9 @@ def _torque_balance_rows(base: dict, res) -> list[dict]:
                              uncertainty=_f(f.uncertainty.get(name)), unit=str(f.units.get(name, "")),
                              nominal=float("nan"), heldout_before=_f(ho.get("before")),
                              heldout_after=_f(ho.get("after")), heldout_metric="torque_rms [N*m]",
-                             accepted=accepted, status="ok" if accepted else "not_identifiable",
+                             accepted=accepted, supported=accepted,
+                             support="accepted by the torque balance" if accepted else "not accepted by the torque balance",
+                             status="ok" if accepted else "not_identifiable",
                              reason=f.reason or "torque balance (no motor current)"))
     if not rows:
         rows.append(dict(base, source="finding", effect="", parameter="", value=float("nan"),
@@ -362,11 +382,67 @@ def run(jobs: list[Job], *, scheduler: str | None = None, workers: int | None = 
             fut.release()
         bar.close()
     finally:
-        if own_client:
-            client.close()
-        if cluster is not None:
-            cluster.close()
+        shutdown(client if own_client else None, cluster)
     return RunResult(rows, failures, len(jobs), joints, time.perf_counter() - t0, n_workers, str(where))
+
+
+#: seconds each of client.close / cluster.close may take before the shutdown goes on without it
+CLOSE_TIMEOUT_S = 30.0
+
+
+def shutdown(client, cluster, timeout: float = CLOSE_TIMEOUT_S) -> list[int]:
+    """Close ``client`` and the local ``cluster`` (either may be None) within ``timeout`` each, then end every
+    process of the cluster's workers that is still alive (terminate, then kill after 5 s). A close that times
+    out or raises (a loaded machine, a worker stuck in a task) no longer leaves live worker processes behind for
+    the interpreter's exit to wait on. Returns the pids that had to be ended."""
+    import psutil
+
+    left = _cluster_processes(cluster, psutil)
+    for what in (client, cluster):
+        if what is None:
+            continue
+        try:
+            what.close(timeout=timeout)
+        except Exception as exc:  # noqa: BLE001 - go on with the rest of the shutdown
+            print(f"fleet: closing the Dask {type(what).__name__} failed ({type(exc).__name__}: {exc}); "
+                  "ending its processes", file=sys.stderr)
+    left = [c for c in left if _alive(c, psutil)]
+    for c in left:
+        with _quiet(psutil):
+            c.terminate()
+    _, alive = psutil.wait_procs(left, timeout=5.0)
+    for c in alive:
+        with _quiet(psutil):
+            c.kill()
+    psutil.wait_procs(alive, timeout=5.0)
+    return [c.pid for c in left]
+
+
+def _cluster_processes(cluster, psutil) -> list:
+    """The processes of a local cluster's workers (each worker's pid, ``Nanny.pid``, and its children), taken
+    before it is closed; none for a remote scheduler (its processes are not this command's)."""
+    out = []
+    for w in list(getattr(cluster, "workers", {}).values()) if cluster is not None else []:
+        pid = getattr(w, "pid", None)
+        if not pid:
+            continue
+        with _quiet(psutil):
+            p = psutil.Process(pid)
+            out += [p, *p.children(recursive=True)]
+    return out
+
+
+def _alive(p, psutil) -> bool:
+    try:
+        return p.is_running() and p.status() != psutil.STATUS_ZOMBIE
+    except (psutil.NoSuchProcess, psutil.AccessDenied):
+        return False
+
+
+def _quiet(psutil):
+    import contextlib
+
+    return contextlib.suppress(psutil.NoSuchProcess, psutil.AccessDenied)
 
 
 def _bar(total: int, enabled: bool):

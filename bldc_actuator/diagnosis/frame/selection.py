@@ -363,6 +363,16 @@ def _gate(ctx: Context, cand: Candidate, best: Evaluation, base: Fit, weights, g
     return best
 
 
+def judge_form(ctx: Context, cand: Candidate, variant: Variant, added: list[str], base: Fit, new: Fit,
+               weights: dict[str, float], gate: GateConfig | None = None) -> Evaluation:
+    """The acceptance gate of :func:`forward_select` (plausible values, ΔBIC on training data, a significant
+    held-out improvement that worsens no equation) for one form ``variant`` of ``cand`` whose columns ``added``
+    turn the fit ``base`` into ``new``. The public face of that gate for callers that fit outside the forward
+    selection (the fleet's tracked parameters: an off-nominal alert needs the support a finding needs)."""
+    ev = Evaluation(cand.name, variant, list(added), new, delta_bic(base, new), {}, False, "")
+    return _gate(ctx, cand, ev, base, weights, gate or GateConfig())
+
+
 def _best_form(ctx, name, variants, accepted, used_labels, keys, cols, weights, iterating, base,
                gate: GateConfig) -> Evaluation | None:
     """A candidate's form for this round, chosen on training data: best ΔBIC, but the simplest among those
