@@ -36,6 +36,10 @@ def test_generator_imports_nothing_of_bldc_actuator():
     sim = _imports(REPO / "benchmarks" / "concealed" / "fresh_sim.py")
     assert not [m for m in sim if "bldc_actuator" in m], sim
     assert sim <= {"__future__", "__future__.annotations", "math", "time", "typing", "typing.Callable", "numpy"}, sim
+    mot = _imports(REPO / "benchmarks" / "concealed" / "fresh_motulator.py")
+    assert not [m for m in mot if "bldc_actuator" in m], mot
+    runner = _imports(REPO / "benchmarks" / "concealed" / "thirdparty_sim.py")     # what the motulator case runs
+    assert not [m for m in runner if "bldc_actuator" in m], runner
     cases = _imports(REPO / "benchmarks" / "concealed" / "fresh_cases.py")
     assert not [m for m in cases if "bldc_actuator" in m and any(p in m for p in PHYSICS)], cases
     # at run time too: simulating a case loads no bldc_actuator module

@@ -31,6 +31,7 @@ from typing import Callable
 import numpy as np
 
 from . import case_kit as kit
+from . import fresh_motulator as mot
 from . import fresh_sim as sim
 
 #: the user's log is read with --voltage-timing command: the drive logs the voltage it computed from the sample
@@ -336,6 +337,25 @@ def _cases() -> tuple[FreshCase, ...]:
          "drive": _drive(M1, outer="speed", v_bus=12.0, anti_windup="clamping", **_speed_gains(J14, M1["K"], 25.0)),
          "excitation": _ms([110, 40, 20], [0.4, 1.1, 2.6], triangle=8.0)},
         _nominal(M1, J=J14, v_bus=12.0), seed=54, effect_kind="coulomb", source="own ODE (fresh_sim)"))
+    # ---- 16 a motulator version other than the third-party set's: motulator 0.17.1's own drive, R 30 % high
+    J16 = M1["J"] + 3.0e-4
+    psi16 = M1["K"] / (math.sqrt(1.5) * M1["p"])          # motulator's peak flux linkage of K_q
+    mp16 = {"n_p": M1["p"], "R_s": 1.3 * M1["R"], "L_d": M1["L"], "L_q": M1["L"], "psi_f": psi16}
+    cs.append(FreshCase(
+        "fr_motulator017_resistance", ("resistance_error",), "motulator 0.17.1 (not the third-party set's 0.18): its "
+        "CurrentVectorController (own delay compensation, no feed-forward) under its SpeedController, M1 with a "
+        "3e-4 kg·m² load and a known 0.2 N·m load torque; phase resistance 30 % above the datasheet",
+        {"resistance_error": {"phase_resistance": 1.3 * M1["R"]}},
+        {"generator": "motulator", "motor": {"R": 1.3 * M1["R"]},
+         "plant": {**mp16, "J": J16, "b": M1["b"], "F_c": 0.0, "t_d": 0.0, "tau_ext": 0.2, "u_dc": 24.0},
+         "drive": {**mp16, "R_s": M1["R"], "J": J16, "i_max_q": 10.0, "alpha_c_hz": 500.0, "alpha_s_hz": 15.0,
+                   "tau_M_max": 0.6, "f_c": 10000.0, "adc_noise": ADC_NOISE, "adc_lsb": ADC_LSB,
+                   "encoder_counts": 2 ** 14, "bandwidth_hz": 500.0, "nominal": {k: M1[k] for k in ("R", "L", "K")}}},
+        _nominal(M1, J=J16, f_c=10000.0, **{"load.load_torque": 0.2, "drive.current_controller": "complex_vector",
+                                             "drive.decoupling_enabled": False, "drive.pwm_frequency": 5000.0,
+                                             "drive.current_loop_delay": 1.0e-4}),
+        seed=56, channel="voltage_q", effect_kind="resistance",
+        source="motulator 0.17.1 (.venv-peers2) through benchmarks/concealed/thirdparty_sim.simulate"))
     # ---- 15 the backlash probe: gear 9, 1° play at the output, rotor angle alone -> not decidable
     N15, Jo15 = 9.0, 5.0e-3
     cs.append(FreshCase(
@@ -381,7 +401,17 @@ def recording_spec(case: FreshCase) -> dict:
             "heldout_s": float(case.heldout_s)}
 
 
+def _is_motulator(case: FreshCase) -> bool:
+    return case.spec.get("generator") == "motulator"
+
+
 def recording_key(case: FreshCase) -> str:
+    if _is_motulator(case):     # its runner, this module's converter and the second venv's motulator version
+        from . import thirdparty_sim
+
+        spec = dict(recording_spec(case), motulator=mot.motulator_version(),
+                    runner=kit.code_stamp(thirdparty_sim, ()))
+        return kit.recording_key(spec, mot, mot.LIBRARIES, (write_recordings, hidden_signal))
     return kit.recording_key(recording_spec(case), sim, sim.LIBRARIES, (write_recordings, hidden_signal))
 
 
@@ -465,7 +495,7 @@ def write_truth(case: FreshCase, d: Path) -> dict:
 
 def _job(args):
     case, role, duration, seed = args
-    return sim.job((case.name, simulation_spec(case), role, duration, seed))
+    return (mot if _is_motulator(case) else sim).job((case.name, simulation_spec(case), role, duration, seed))
 
 
 def ensure(cases, outdir: Path, *, regenerate: bool = False, progress: Callable[[str], None] | None = None,
