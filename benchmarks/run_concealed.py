@@ -6,6 +6,8 @@
     .venv/bin/python benchmarks/run_concealed.py --cases coulomb null_mixed --regenerate
     .venv-peers/bin/python benchmarks/run_concealed.py --set thirdparty   # truth: motulator (peers venv)
     .venv-peers/bin/python benchmarks/run_concealed.py --set gem          # truth: gym-electric-motor (peers venv)
+    PYTHONPATH=. .venv-peers/bin/python benchmarks/run_concealed.py --set fresh   # truth: own ODEs, not the kernel
+                                                                          # (seed offset 0 published; >= 1 held back)
 
 1. generates every case with the independent truth simulator (``benchmarks/concealed``): training and
    held-out CSV, the nominal parameter file, the truth JSON — cached under ``--data`` and regenerated only
@@ -53,6 +55,10 @@ def generator_hash(case_set: str = "builtin") -> str:
         from benchmarks.concealed import gem_cases
 
         return gem_cases.code_stamp()
+    if case_set == "fresh":
+        from benchmarks.concealed import fresh_cases
+
+        return fresh_cases.code_stamp()
     h = hashlib.sha256()
     for name in GENERATOR_SOURCES:
         h.update((REPO / "benchmarks" / "concealed" / name).read_bytes())
@@ -64,10 +70,12 @@ def generator_hash(case_set: str = "builtin") -> str:
 
 def ensure_data(cases, data_dir: Path, regenerate: bool, log, case_set: str = "builtin") -> dict[str, dict]:
     """Generate the cases whose files are missing or stale; return their truth dicts."""
-    if case_set in ("thirdparty", "gem"):
+    if case_set in ("thirdparty", "gem", "fresh"):
         # per-case recording keys; the truth and nominal files are rewritten from the cases on every run
         if case_set == "thirdparty":
             from benchmarks.concealed import thirdparty as S
+        elif case_set == "fresh":
+            from benchmarks.concealed import fresh_cases as S
         else:
             from benchmarks.concealed import gem_cases as S
         t0 = time.perf_counter()
@@ -177,16 +185,19 @@ def concealment_table(cases, truths) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--set", dest="case_set", choices=("builtin", "thirdparty", "gem"), default="builtin",
+    ap.add_argument("--set", dest="case_set", choices=("builtin", "thirdparty", "gem", "fresh"), default="builtin",
                     help="builtin: the project's own truth simulator (benchmarks/concealed/truth.py); thirdparty: "
                          "motulator's PMSM drive as the truth (benchmarks/concealed/thirdparty.py; run in the peers "
                          "venv, bash benchmarks/peers/setup.sh); gem: gym-electric-motor's PMSM as the truth under a "
-                         "drive written outside it (benchmarks/concealed/gem_cases.py; peers venv)")
+                         "drive written outside it (benchmarks/concealed/gem_cases.py; peers venv); fresh: issue #24's fresh set, "
+                         "plant and drive ODEs written without the kernel (benchmarks/concealed/fresh_cases.py): "
+                         "seed offset 0 is the published baseline, seed offsets >= 1 are HELD BACK (never tune on "
+                         "them; run them only at the end)")
     ap.add_argument("--cases", nargs="*", help="case names (default: all)")
     ap.add_argument("--quick", action="store_true", help="only the fast subset (also run by test/test_concealed.py)")
     ap.add_argument("--seed-offset", type=int, default=0,
                     help="fresh noise and excitation seeds for every case (0 = the published ones); a check that "
-                         "the diagnoser was not tuned to one draw")
+                         "the diagnoser was not tuned to one draw (--set fresh: offsets >= 1 are held back)")
     ap.add_argument("--data", type=Path, default=None,
                     help="where generated recordings are cached (default: benchmarks/.cache/concealed[-seedsK])")
     ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results",
@@ -208,6 +219,8 @@ def main(argv=None) -> int:
         from benchmarks.concealed import thirdparty as S
     elif args.case_set == "gem":
         from benchmarks.concealed import gem_cases as S
+    elif args.case_set == "fresh":
+        from benchmarks.concealed import fresh_cases as S
     else:
         S = C
     cases = list(S.CASES)
@@ -216,7 +229,7 @@ def main(argv=None) -> int:
     if args.cases:
         cases = [S.get_case(n) for n in args.cases]
     cases = [S.reseeded(c, args.seed_offset) for c in cases]
-    set_stem = {"builtin": "concealed", "thirdparty": "thirdparty", "gem": "gem"}[args.case_set]
+    set_stem = {"builtin": "concealed", "thirdparty": "thirdparty", "gem": "gem", "fresh": "fresh"}[args.case_set]
     if args.data is None:
         args.data = REPO / "benchmarks" / ".cache" / (set_stem + (f"-seeds{args.seed_offset}" if args.seed_offset else ""))
     t_start = time.perf_counter()
@@ -237,7 +250,8 @@ def main(argv=None) -> int:
     for k, case in enumerate(cases, start=1):
         log(f"[{k}/{len(cases)}] {case.name}: hidden {', '.join(case.effects) or 'nothing'} ...")
         report, wall, err = run_case(args.data / case.name, run_dir / case.name, held, args.timeout,
-                                     [*getattr(S, "DIAGNOSE_ARGS", ()), *args.diagnose_arg])
+                                     [*getattr(S, "DIAGNOSE_ARGS", ()), *getattr(case, "diagnose_args", ()),
+                                      *args.diagnose_arg])
         with warnings.catch_warnings():     # the case's diagnose run has printed its own parameter warnings
             warnings.simplefilter("ignore", ParameterWarning)
             nominal = load_yaml(args.data / case.name / "params.yaml").to_flat()
@@ -264,7 +278,8 @@ def main(argv=None) -> int:
          "truth": {n: {k: v for k, v in t.items() if k != "ranges"} for n, t in truths.items()}},
         indent=2, default=float) + "\n")
     md = ["# Concealed-effect benchmark: results" + {"thirdparty": " (third-party truth: motulator)",
-                                                     "gem": " (third-party truth: gym-electric-motor)"}.get(
+                                                     "gem": " (third-party truth: gym-electric-motor)",
+                                                     "fresh": " (fresh set: own ODE truth, not the kernel)"}.get(
                                                          args.case_set, ""), "",
           f"Generated by `benchmarks/run_concealed.py` ({meta['date']}, git {meta['git']}, generator {meta['generator']}).",
           "Method: docs/benchmark.md.", "", "## Summary", "", "```", scoring.summary_text(summary), "```", "",
@@ -281,7 +296,8 @@ def main(argv=None) -> int:
     (args.out / f"{stem}.md").write_text("\n".join(md))
     if args.update_doc:
         update_doc(args.update_doc, meta, summary, scores, truths, cases,
-                   *{"thirdparty": (TP_BEGIN, TP_END), "gem": (GEM_BEGIN, GEM_END)}.get(args.case_set, (BEGIN, END)))
+                   *{"thirdparty": (TP_BEGIN, TP_END), "gem": (GEM_BEGIN, GEM_END),
+                     "fresh": (FRESH_BEGIN, FRESH_END)}.get(args.case_set, (BEGIN, END)))
     log(f"wrote {args.out / (stem + '.md')} and {args.out / (stem + '.json')}")
     return 1 if failed else 0
 
@@ -289,6 +305,7 @@ def main(argv=None) -> int:
 BEGIN, END = "<!-- concealed-results:begin -->", "<!-- concealed-results:end -->"
 TP_BEGIN, TP_END = "<!-- thirdparty-results:begin -->", "<!-- thirdparty-results:end -->"
 GEM_BEGIN, GEM_END = "<!-- gem-results:begin -->", "<!-- gem-results:end -->"
+FRESH_BEGIN, FRESH_END = "<!-- fresh-results:begin -->", "<!-- fresh-results:end -->"
 
 
 def update_doc(path: Path, meta, summary, scores, truths, cases, BEGIN=BEGIN, END=END) -> None:
