@@ -141,3 +141,36 @@ def test_the_replay_sticks_below_the_break_away_voltage():
     w = vm.simulate_speed(J, kr, dmp, tc, 0.0, v, dt, np.zeros(2))
     assert np.all(w[0] == 0.0)
     np.testing.assert_allclose(w[1, -1], (kr * 3.0 - tc) / dmp, rtol=1e-6)
+
+
+def test_the_electrical_lag_is_modelled_where_the_sampling_resolves_it(tmp_path):
+    """A BLDC in voltage mode (q-axis equivalent) logged at 1 kHz with L/R = 2 ms: the current lags the voltage
+    by two samples, i = LP[(v - K ω)/R]; the route models the lag and still recovers K/R and the friction."""
+    k, r, l, j, b, tc, rate = 0.05, 0.5, 1.0e-3, 1.0e-4, 2.0e-4, 0.02, 1000.0
+
+    def volt(t):
+        return (4.0 * np.sin(2 * np.pi * 0.5 * t) + 1.5 * np.sin(2 * np.pi * 3.1 * t + 0.4)
+                + 0.8 * np.sin(2 * np.pi * 11.0 * t + 1.3))
+
+    def rhs(t, x):
+        w, i = x
+        return [(k * i - b * w - tc * np.tanh(w / 0.05)) / j, (volt(t) - r * i - k * w) / l]
+
+    t = np.arange(int(20.0 * rate)) / rate
+    sol = solve_ivp(rhs, (0.0, t[-1]), [0.0, 0.0], method="LSODA", t_eval=t, rtol=1e-8, atol=1e-9, max_step=5e-4)
+    assert sol.success
+    w = sol.y[0] + 0.05 * np.random.default_rng(5).standard_normal(len(t))
+    p = ActuatorParams().replace(**{"motor.torque_constant_q": k, "motor.phase_resistance": r,
+                                    "motor.q_inductance": l, "motor.rotor_inertia": j,
+                                    "motor.viscous_damping": 1e-5, "effects.coulomb_friction": 0.0})
+    path = tmp_path / "vq.csv"
+    path.write_text("time,voltage_q,velocity\n" + "\n".join(f"{a:.10g},{v:.10g},{x:.10g}"
+                                                            for a, v, x in zip(t, volt(t), w)) + "\n")
+    sig = clean(loaders.load(path, params=p), params=p)
+    res = vm.diagnose(sig, p)
+    assert res.electrical_lag, res.notes
+    cmb = res.combinations
+    for name, truth in (("torque_constant_over_resistance", k / r), ("back_emf_plus_viscous", k * k / r + b),
+                        ("coulomb_friction", tc)):
+        assert abs(cmb[name]["value"] - truth) <= 3 * cmb[name]["sd"], (name, cmb[name], truth)
+    assert vm.effect_for("effects.coulomb_friction") in {f.effect for f in res.findings}
