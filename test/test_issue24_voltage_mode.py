@@ -174,3 +174,45 @@ def test_the_electrical_lag_is_modelled_where_the_sampling_resolves_it(tmp_path)
                         ("coulomb_friction", tc)):
         assert abs(cmb[name]["value"] - truth) <= 3 * cmb[name]["sd"], (name, cmb[name], truth)
     assert vm.effect_for("effects.coulomb_friction") in {f.effect for f in res.findings}
+
+
+def test_a_pendulum_on_the_output_is_told_from_friction(tmp_path):
+    """The servo swinging a pendulum (τ_g sin θ_out at the output): the gravity-like load is found with its
+    amplitude and phase, and the friction is still recovered beside it."""
+    tau_g, phase = 0.25, 0.3                         # N*m at the output, rad
+    w_s = 0.2
+
+    def rhs(t, x):
+        v = _duty(t) * _vbus(t)
+        th, w = x
+        load = tau_g * np.sin(th / GEAR + phase) / GEAR
+        return [w, (K / R * (v - K * w) - B_TRUE * w - TC_TRUE * np.tanh(w / w_s) - load) / J]
+
+    t = np.arange(int(40.0 * RATE)) / RATE
+    sol = solve_ivp(rhs, (0.0, t[-1]), [0.0, 0.0], method="LSODA", t_eval=t, rtol=1e-8, atol=1e-8, max_step=1e-3)
+    assert sol.success
+    rng = np.random.default_rng(7)
+    cols = {"t": t, "angle_out": sol.y[0] / GEAR + 1e-4 * rng.standard_normal(len(t)),
+            "speed_out": sol.y[1] / GEAR + 0.004 * rng.standard_normal(len(t)), "duty": _duty(t), "v_bus": _vbus(t)}
+    path = tmp_path / "pendulum.csv"
+    path.write_text(",".join(cols) + "\n" + "\n".join(",".join(f"{v:.10g}" for v in r)
+                                                       for r in np.column_stack(list(cols.values()))) + "\n")
+    p = _nominal()
+    res = vm.diagnose(_signals(path, p), p)
+    named = {f.effect: f for f in res.findings}
+    load = named.get(vm.effect_for("load.gravity_torque"))
+    assert load is not None, [(r.effect, r.reason) for r in res.rejected]
+    g, ph = load.parameters["gravity_torque"], load.parameters["gravity_phase"]
+    assert abs(g - tau_g) <= 3 * load.uncertainty["gravity_torque"], load
+    assert abs(ph - phase) <= 3 * load.uncertainty["gravity_phase"], load
+    tc = res.combinations["coulomb_friction"]
+    assert abs(tc["value"] - TC_TRUE) <= 3 * tc["sd"], tc
+    assert vm.effect_for("effects.coulomb_friction") in named
+
+
+def test_effect_names_come_from_the_library():
+    from bldc_actuator.diagnosis.frame.candidates import EFFECT_NAMES
+
+    names = {f: vm.effect_for(f) for f in ("effects.coulomb_friction", "motor.viscous_damping",
+                                           "motor.phase_resistance", "load.gravity_torque")}
+    assert set(names.values()) <= set(EFFECT_NAMES) and len(set(names.values())) == 4, names

@@ -61,16 +61,23 @@ def effect_for(field_name: str) -> str:
             return hits[0].name
     except ImportError:
         pass
-    from .frame.candidates import EFFECT_NAMES
+    import re
 
+    from .frame.candidates import library
+
+    lib = library()
     leaf = field_name.rsplit(".", 1)[-1]
-    if leaf in EFFECT_NAMES:
+    if leaf in lib:
         return leaf
-    words = set(leaf.split("_"))
-    for name in EFFECT_NAMES:
-        if name.split("_")[0] in words:
-            return name
-    raise KeyError(f"no effect writes {field_name}")
+    words = set(re.split(r"[._]", field_name))
+
+    def score(c) -> int:
+        return len(words & set(re.findall(r"[a-z]+", (c.name.replace("_", " ") + " " + c.description).lower())))
+
+    best = max(lib.values(), key=score)            # the first of equal scores, in library order
+    if not score(best):
+        raise KeyError(f"no effect writes {field_name}")
+    return best.name
 
 
 # --------------------------------------------------------------------------------------------- records
@@ -147,6 +154,7 @@ class _Columns:
     seg: np.ndarray        #: segment index per sample
     ok: np.ndarray
     m: int                 #: samples per fitted interval
+    th: np.ndarray | None = None   #: motor-side angle from the position channel (None without one)
 
 
 def _columns(sig: Signals, tau_e: float) -> tuple[_Columns, bool, str]:
@@ -155,6 +163,7 @@ def _columns(sig: Signals, tau_e: float) -> tuple[_Columns, bool, str]:
     ch = sig.channels
     n = len(sig.time)
     cols = {k: np.full(n, np.nan) for k in ("v", "w_f", "w", "w_raw", "v_raw")}
+    th = np.full(n, np.nan) if _has(sig, "position") else None
     seg = np.full(n, -1)
     lagged = False
     how = "speed channel" if _has(sig, "velocity") else "speed differentiated from the angle"
@@ -175,16 +184,21 @@ def _columns(sig: Signals, tau_e: float) -> tuple[_Columns, bool, str]:
             lagged = True
         cols["v"][s:e], cols["w_f"][s:e], cols["w"][s:e] = vf, wf, savgol_filter(w, win, 2)
         cols["w_raw"][s:e], cols["v_raw"][s:e] = w, v
+        if th is not None:
+            th[s:e] = _fill(ch["position"][s:e])
         seg[s:e] = k
     ok = np.all([np.isfinite(c) for c in cols.values()], axis=0) & (seg >= 0)
-    return _Columns(sig.time, cols["v"], cols["w_f"], cols["w"], cols["w_raw"], cols["v_raw"], seg, ok, m), \
+    return _Columns(sig.time, cols["v"], cols["w_f"], cols["w"], cols["w_raw"], cols["v_raw"], seg, ok, m, th), \
         lagged, how
 
 
-def _intervals(c: _Columns, w_eps: float, viscous_share: float = 0.0):
+def _intervals(c: _Columns, w_eps: float, viscous_share: float = 0.0, gear: float = 1.0):
     """The equation integrated over intervals of ``c.m`` samples (no differentiated speed, no filter gain on one
     side only): J Δω/Δt = (K/R) <v> - (K²/R + b) <ω> - τ_c sign(ω) - τ_0, <.> the trapezoid mean. Intervals that
-    touch standstill (|ω| <= w_eps) or a reversal are left out. Returns (start index, y, columns)."""
+    touch standstill (|ω| <= w_eps) or a reversal are left out. The damping column mixes the back-EMF's lagged
+    speed and the viscous torque's own speed by ``viscous_share`` = b/(K²/R + b) (one column when the lag is not
+    resolved). With an angle, the columns of a gravity-like load at the output, -sin(θ/N)/N and -cos(θ/N)/N.
+    Returns (start index, y, columns, the trapezoid mean over the intervals)."""
     m = c.m
     starts = []
     for k in np.unique(c.seg[c.seg >= 0]):
@@ -192,7 +206,7 @@ def _intervals(c: _Columns, w_eps: float, viscous_share: float = 0.0):
         starts.extend(range(int(idx[0]), int(idx[-1]) - m + 1, m))
     starts = np.asarray(starts, int)
     if not len(starts):
-        return starts, np.zeros(0), {}
+        return starts, np.zeros(0), {}, None
     span = starts[:, None] + np.arange(m + 1)[None, :]
     good = c.ok[span].all(axis=1)
     ws = c.w[span]
@@ -208,7 +222,10 @@ def _intervals(c: _Columns, w_eps: float, viscous_share: float = 0.0):
     w_mix = (1.0 - viscous_share) * mean(c.w_f) + viscous_share * mean(c.w_raw)
     cols = {"k_over_r": mean(c.v), "damping": -w_mix, "coulomb": -np.sign(c.w[span[:, m // 2]]),
             "offset": -np.ones(len(starts))}
-    return starts, y, cols
+    if c.th is not None:
+        cols["load_sin"] = -mean(np.sin(c.th / gear)) / gear
+        cols["load_cos"] = -mean(np.cos(c.th / gear)) / gear
+    return starts, y, cols, mean
 
 
 def _lstsq(X: np.ndarray, y: np.ndarray):
@@ -239,15 +256,18 @@ def _blocks(n: int, frac: float, nblocks: int = 10) -> np.ndarray:
 # --------------------------------------------------------------------------------------------- replay
 
 def simulate_speed(J: float, k_over_r: float, damping: float, coulomb: float, offset: float,
-                   v: np.ndarray, dt: np.ndarray, w0: np.ndarray, substeps: int = SUBSTEPS) -> np.ndarray:
+                   v: np.ndarray, dt: np.ndarray, w0: np.ndarray, substeps: int = SUBSTEPS, *,
+                   theta0: np.ndarray | None = None, load=None) -> np.ndarray:
     """Motor-side speed of J dω/dt = (K/R) v - (K²/R + b) ω - τ_c sign(ω) - τ_0 under the voltage ``v``
     (windows x samples, linear between samples) from ``w0`` (per window), ``dt`` the sample intervals (windows x
     samples-1). Each sub-interval exactly (the voltage held at its midpoint); a speed crossing zero stops there
-    and sticks while |(K/R) v - τ_0| <= τ_c."""
+    and sticks while |(K/R) v - τ_0| <= τ_c. ``load(theta)``: a motor-side load torque of the motor angle
+    (from ``theta0``), held over each sub-interval."""
     v = np.atleast_2d(v)
     m, k = v.shape
     out = np.empty((m, k))
     w = np.asarray(w0, float).copy()
+    th = None if load is None else np.asarray(theta0, float).copy()
     out[:, 0] = w
     lam = max(damping, 1e-300) / J
     for j in range(k - 1):
@@ -255,6 +275,8 @@ def simulate_speed(J: float, k_over_r: float, damping: float, coulomb: float, of
         for s in range(substeps):
             f = (s + 0.5) / substeps
             drive = k_over_r * ((1 - f) * v[:, j] + f * v[:, j + 1]) - offset
+            if th is not None:
+                drive = drive - load(th)
             moving = w != 0.0
             sgn = np.where(moving, np.sign(w), np.sign(drive))
             stuck = ~moving & (np.abs(drive) <= coulomb)
@@ -263,7 +285,10 @@ def simulate_speed(J: float, k_over_r: float, damping: float, coulomb: float, of
             e = np.exp(-lam * h)
             w_new = w_inf + (w - w_inf) * e
             crossed = moving & (np.sign(w_new) != np.sign(w)) & (coulomb > 0)
-            w = np.where(stuck | crossed, 0.0, w_new)
+            w_next = np.where(stuck | crossed, 0.0, w_new)
+            if th is not None:
+                th = th + 0.5 * (w + w_next) * h
+            w = w_next
         out[:, j + 1] = w
     return out
 
@@ -284,17 +309,42 @@ def _windows(c: _Columns, test: np.ndarray, rows: np.ndarray, length: int) -> li
     return out
 
 
-def _replay(c: _Columns, wins: list[np.ndarray], J: float, coef: dict) -> np.ndarray:
+def _replay(c: _Columns, wins: list[np.ndarray], J: float, coef: dict, rest=None, gear: float = 1.0) -> np.ndarray:
     """Per-window RMS of the replayed speed against the logged one [rad/s]."""
     if not wins:
         return np.zeros(0)
     W = np.stack(wins)
+    load = None
+    if c.th is not None:
+        def load(th):
+            tho = th / gear
+            out = coef.get("load_sin", 0.0) * np.sin(tho) + coef.get("load_cos", 0.0) * np.cos(tho)
+            return (out + (rest(tho) if rest is not None else 0.0)) / gear
     sim = simulate_speed(J, coef["k_over_r"], coef["damping"], max(0.0, coef["coulomb"]), coef["offset"],
-                         c.v_raw[W], np.diff(c.t[W], axis=1), c.w[W[:, 0]])
+                         c.v_raw[W], np.diff(c.t[W], axis=1), c.w[W[:, 0]],
+                         theta0=c.th[W[:, 0]] if c.th is not None else None, load=load)
     return np.sqrt(np.mean((sim - c.w_raw[W]) ** 2, axis=1))
 
 
 # --------------------------------------------------------------------------------------------- diagnosis
+
+#: terms fitted as several columns
+TERM_COLUMNS = {"load": ("load_sin", "load_cos")}
+MIN_LOAD_SPAN = 0.5       #: [rad] output angle a gravity-like load needs to be told from a constant
+
+
+def _gravity(a: float, b: float, cov: np.ndarray, idx: dict) -> tuple[float, float, float, float]:
+    """τ_g sin(θ + φ) = a sin θ + b cos θ: (τ_g, sd, φ, sd) from (a, b) and their covariance."""
+    g = math.hypot(a, b)
+    ph = math.atan2(b, a)
+    i, j = idx["load_sin"], idx["load_cos"]
+    C = cov[np.ix_([i, j], [i, j])]
+    if g == 0:
+        return 0.0, float("nan"), 0.0, float("nan")
+    jg = np.array([a / g, b / g])
+    jp = np.array([-b / g ** 2, a / g ** 2])
+    return g, float(math.sqrt(max(jg @ C @ jg, 0.0))), ph, float(math.sqrt(max(jp @ C @ jp, 0.0)))
+
 
 #: the combinations: key -> (parameter name, unit, what it is)
 COMBINATIONS = {
@@ -311,6 +361,14 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
     tau_e = float(m.q_inductance) / R
     nominal = {"k_over_r": K / R, "damping": K * K / R + float(m.viscous_damping),
                "coulomb": float(e.coulomb_friction), "offset": 0.0}
+    N = float(sig.meta.get("gear_ratio") or params.gear.gear_ratio)
+    ld = params.load
+    nominal["load_sin"] = float(ld.gravity_torque) * math.cos(float(ld.gravity_phase))
+    nominal["load_cos"] = float(ld.gravity_torque) * math.sin(float(ld.gravity_phase))
+
+    def rest(tho):          # the nominal load's other parts at the output (constant, spring) [N*m]
+        return float(ld.load_torque) + float(ld.spring_stiffness) * (tho - float(ld.spring_zero))
+
     c, lagged, how = _columns(sig, tau_e)
     notes = [f"no current sensor: the mechanical equation closed by the voltage, i = (v - K ω)/R"
              + (f" lagged by L/R = {1e3 * tau_e:.3g} ms (resolved by the sampling)" if lagged else
@@ -320,12 +378,12 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
     w_eps = max(1e-3, 0.02 * wmax)
     rows = np.flatnonzero(c.ok)
     share = float(m.viscous_damping) / nominal["damping"]
-    starts, dw, cols = _intervals(c, w_eps, share)
+    starts, dw, cols, mean = _intervals(c, w_eps, share, N)
     for _ in range(3 if lagged and len(starts) >= 50 else 0):     # b's share of the damping, fixed point
-        X = np.column_stack([cols[k] for k in ("k_over_r", "damping", "coulomb", "offset")])
+        X = np.column_stack([cols[k] for k in cols])
         a1, a2 = np.linalg.lstsq(X, J * dw, rcond=None)[0][:2]
         share = float(np.clip((a2 - K * a1) / a2, 0.0, 1.0)) if a2 > 0 else 0.0
-        starts, dw, cols = _intervals(c, w_eps, share)
+        starts, dw, cols, mean = _intervals(c, w_eps, share, N)
     n = len(starts)
     empty = VoltageModeResult([], [], {}, notes, {}, {}, lagged)
     if n < 50:
@@ -335,17 +393,22 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
     both_ways = min(np.mean(sgn > 0), np.mean(sgn < 0)) > 0.05
     notes.append(f"{n} intervals of {c.m} sample(s) fitted (the equation integrated over each: no differentiated "
                  f"speed); intervals touching standstill (|ω| <= {w_eps:.3g} rad/s) or a reversal left out")
-    base = J * dw - sum(nominal[k] * cols[k] for k in ("k_over_r", "damping", "coulomb"))
+    base = J * dw - sum(nominal[k] * cols[k] for k in cols if k != "offset")
+    if c.th is not None:
+        base = base + mean(rest(c.th / N)) / N
     test = _blocks(n, holdout)
     train = ~test
 
+    def keys(free):
+        return [kk for k in free for kk in TERM_COLUMNS.get(k, (k,))]
+
     def fit(free, sel):
-        X = np.column_stack([cols[k][sel] for k in free])
+        X = np.column_stack([cols[k][sel] for k in keys(free)])
         return _lstsq(X, base[sel])
 
     def heldout(free):
         coef, _, _ = fit(free, train)
-        pred = np.column_stack([cols[k][test] for k in free]) @ coef
+        pred = np.column_stack([cols[k][test] for k in keys(free)]) @ coef
         return float(np.sqrt(np.mean((base[test] - pred) ** 2)))
 
     def rss(free):
@@ -354,6 +417,12 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
     # forward selection of the freed combinations (the constant torque is always free: a nuisance)
     free = ["offset"]
     terms = ["k_over_r", "damping"] + (["coulomb"] if both_ways else [])
+    span_out = float(np.ptp(c.th[rows])) / N if c.th is not None and len(rows) else 0.0
+    if span_out >= MIN_LOAD_SPAN:
+        terms.append("load")
+    else:
+        notes.append(f"a load of the output angle (gravity) is not tested: " + (
+            "no angle channel" if c.th is None else f"the output angle spans {span_out:.3g} rad < {MIN_LOAD_SPAN:g}"))
     if not both_ways:
         notes.append("motion in one direction only: Coulomb friction and the constant torque are one column "
                      "(experiment: drive it both ways)")
@@ -362,7 +431,7 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
     left = list(terms)
     while left:
         r0 = rss(free)
-        trials = {k: _bic(r0, n, len(free)) - _bic(rss(free + [k]), n, len(free) + 1) for k in left}
+        trials = {k: _bic(r0, n, len(keys(free))) - _bic(rss(free + [k]), n, len(keys(free + [k]))) for k in left}
         k = max(trials, key=trials.get)
         before, after = heldout(free), heldout(free + [k])
         if trials[k] > BIC_GATE and after < before:
@@ -377,7 +446,7 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
     # the identified combinations: every coefficient free (what the data say, with their uncertainties)
     all_free = ["offset"] + terms
     coef_all, cov_all, _ = fit(all_free, np.ones(n, bool))
-    ia = {k: i for i, k in enumerate(all_free)}
+    ia = {k: i for i, k in enumerate(keys(all_free))}
 
     def val(k):
         return nominal.get(k, 0.0) + float(coef_all[ia[k]])
@@ -388,6 +457,8 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
 
     combos = {}
     for k in terms:
+        if k not in COMBINATIONS:
+            continue
         name, unit, what = COMBINATIONS[k]
         combos[name] = {"value": val(k), "sd": sd(k), "unit": unit, "nominal": nominal[k], "what": what,
                         "identifiable": "identified (given J nominal)"}
@@ -417,11 +488,19 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
         "value": None, "sd": None, "unit": "", "nominal": None, "what": "K_t and R separately",
         "identifiable": "not identifiable without current (only K_t/R, and K_e + b R/K_t)"}
 
+    if "load" in terms:
+        g, gsd, ph, phsd = _gravity(val("load_sin"), val("load_cos"), cov_all, ia)
+        combos["gravity_torque"] = {"value": g, "sd": gsd, "unit": "N*m", "nominal": float(ld.gravity_torque),
+                                    "what": "tau_g: a gravity-like load at the output, tau_g sin(theta_out + phi)",
+                                    "identifiable": "identified (given J nominal)"}
+        combos["gravity_phase"] = {"value": ph, "sd": phsd, "unit": "rad", "nominal": float(ld.gravity_phase),
+                                   "what": "phi_g", "identifiable": "identified (independent of J)"}
+
     # the final model and its uncertainties
     coef, cov, _ = fit(free, np.ones(n, bool))
-    idx = {k: i for i, k in enumerate(free)}
+    idx = {k: i for i, k in enumerate(keys(free))}
     final = dict(nominal)
-    for k in free:
+    for k in keys(free):
         final[k] = nominal.get(k, 0.0) + float(coef[idx[k]])
 
     # judge: the held-out windows replayed under the recorded voltage, leave one out
@@ -430,8 +509,8 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
     test_all = _blocks(len(rows), holdout)
     wins = _windows(c, test_all, rows, length)
     base_coef = dict(nominal, offset=final["offset"])
-    err_final = _replay(c, wins, J, final)
-    err_nom = _replay(c, wins, J, base_coef)
+    err_final = _replay(c, wins, J, final, rest, N)
+    err_nom = _replay(c, wins, J, base_coef, rest, N)
     sim = {"channel": "the route's own mechanical ODE under the recorded voltage (frame.simulate has no "
                       "voltage-commanded DC drive)", "windows": len(wins), "window_s": length * dt_med,
            "metric": "speed error RMS", "unit": "rad/s",
@@ -439,11 +518,11 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
            "updated": float(np.sqrt(np.mean(err_final ** 2))) if len(wins) else None}
 
     fields = {"k_over_r": "motor.phase_resistance", "damping": "motor.viscous_damping",
-              "coulomb": "effects.coulomb_friction"}
+              "coulomb": "effects.coulomb_friction", "load": "load.gravity_torque"}
     findings, rejected = [], []
     for k in terms:
         effect = effect_for(fields[k])
-        name, unit, what = COMBINATIONS[k]
+        name, unit, what = COMBINATIONS.get(k, ("gravity_torque", "N*m", ""))
         if k not in free:
             dbic, before, after = rejected_steps.get(k, (float("nan"),) * 3)
             rejected.append(Term(effect, {}, {}, {}, {"metric": "torque_rms", "unit": "N*m", "before": before,
@@ -451,8 +530,13 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
                                  f"not supported (dBIC {dbic:.1f} <= {BIC_GATE:g} or held-out not better)"))
             continue
         dbic, before, after = steps[k]
-        value, s = final[k], sd(k, cov, idx)
-        par, unc, un = {name: value}, {name: s}, {name: unit}
+        if k == "load":
+            value, s, ph, phsd = _gravity(final["load_sin"], final["load_cos"], cov, idx)
+            par, unc, un = ({"gravity_torque": value, "gravity_phase": ph}, {"gravity_torque": s, "gravity_phase": phsd},
+                            {"gravity_torque": "N*m", "gravity_phase": "rad"})
+        else:
+            value, s = final[k], sd(k, cov, idx)
+            par, unc, un = {name: value}, {name: s}, {name: unit}
         if k == "damping":
             bb = value - K * final["k_over_r"]
             par["viscous_damping_given_nominal_K"], unc["viscous_damping_given_nominal_K"] = bb, s
@@ -462,8 +546,8 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
             unc["phase_resistance_given_nominal_K"] = K * s / value ** 2
             un["phase_resistance_given_nominal_K"] = "ohm"
         ho = {"metric": "torque_rms", "unit": "N*m", "before": before, "after": after}
-        without = dict(final, **{k: nominal[k]})
-        err_wo = _replay(c, wins, J, without)
+        without = dict(final, **{kk: nominal[kk] for kk in TERM_COLUMNS.get(k, (k,))})
+        err_wo = _replay(c, wins, J, without, rest, N)
         d = err_wo ** 2 - err_final ** 2
         se = float(np.std(d, ddof=1) / math.sqrt(len(d))) if len(d) >= 3 else float("nan")
         simrec = {"metric": "speed error RMS", "unit": "rad/s", "windows": len(d),
@@ -471,7 +555,7 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
                   "with": sim["updated"], "paired_gain": float(np.mean(d)) if len(d) else None, "paired_se": se}
         # practical significance on the parameter written: b for the damping (given K_t nominal)
         moved, ref = ((par["viscous_damping_given_nominal_K"], float(m.viscous_damping)) if k == "damping"
-                      else (value, nominal[k]))
+                      else (value, float(ld.gravity_torque)) if k == "load" else (value, nominal[k]))
         rel = abs(moved - ref) / abs(ref) if ref else math.inf
         reason = ""
         if not (len(d) >= 3 and np.mean(d) > 2 * se):
@@ -490,7 +574,7 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
     return VoltageModeResult(findings, rejected, combos, notes,
                              {"metric": "torque_rms", "unit": "N*m", "nominal": heldout(["offset"]),
                               "after": heldout(free)}, sim, lagged, n,
-                             {k: final[k] for k in ("k_over_r", "damping", "coulomb", "offset")})
+                             {k: final[k] for k in ("k_over_r", "damping", "coulomb", "offset", "load_sin", "load_cos")})
 
 
 def updated_params(params, result: VoltageModeResult):
@@ -505,6 +589,9 @@ def updated_params(params, result: VoltageModeResult):
             upd["motor.viscous_damping"] = max(0.0, p["viscous_damping_given_nominal_K"])
         if "phase_resistance_given_nominal_K" in p and p["phase_resistance_given_nominal_K"] > 0:
             upd["motor.phase_resistance"] = p["phase_resistance_given_nominal_K"]
+        if "gravity_torque" in p:
+            upd["load.gravity_torque"] = p["gravity_torque"]
+            upd["load.gravity_phase"] = p["gravity_phase"]
     return params.replace(**upd) if upd else params
 
 
