@@ -216,3 +216,36 @@ def test_effect_names_come_from_the_library():
     names = {f: vm.effect_for(f) for f in ("effects.coulomb_friction", "motor.viscous_damping",
                                            "motor.phase_resistance", "load.gravity_torque")}
     assert set(names.values()) <= set(EFFECT_NAMES) and len(set(names.values())) == 4, names
+
+
+def test_a_friction_growing_with_the_transmitted_torque_is_said_outside_the_catalogue(tmp_path, friction_log):
+    """Gear friction μ |K i| on top of Coulomb + viscous (what published identifications of such servos need):
+    the route says it is there, outside the catalogue, with μ; the friction-only log says nothing of it."""
+    mu, w_s = 0.12, 0.2
+
+    def rhs(t, x):
+        v = _duty(t) * _vbus(t)
+        w = x[1]
+        tau_m = K / R * (v - K * w)
+        return [w, (tau_m - B_TRUE * w - (TC_TRUE + mu * abs(tau_m)) * np.tanh(w / w_s)) / J]
+
+    t = np.arange(int(40.0 * RATE)) / RATE
+    sol = solve_ivp(rhs, (0.0, t[-1]), [0.0, 0.0], method="LSODA", t_eval=t, rtol=1e-8, atol=1e-8, max_step=1e-3)
+    rng = np.random.default_rng(9)
+    cols = {"t": t, "angle_out": sol.y[0] / GEAR, "speed_out": sol.y[1] / GEAR + 0.004 * rng.standard_normal(len(t)),
+            "duty": _duty(t), "v_bus": _vbus(t)}
+    path = tmp_path / "gear.csv"
+    path.write_text(",".join(cols) + "\n" + "\n".join(",".join(f"{v:.10g}" for v in r)
+                                                       for r in np.column_stack(list(cols.values()))) + "\n")
+    p = _nominal()
+    rep = pipeline.diagnose(_signals(path, p), p)
+    tdf = rep.compare["voltage_mode"]["combinations"].get("torque_dependent_friction")
+    assert tdf is not None, rep.notes
+    assert abs(tdf["value"] - mu) <= 3 * tdf["sd"] + 0.05 * mu, tdf
+    assert "outside the catalogue" in rep.verdict
+    # while motoring μ|K i| is the K_t/R column: with it K_t/R is nominal again, and R is not called off
+    kr, kr_sd = tdf["k_over_r_with_it"]
+    assert abs(kr - K / R) <= 3 * kr_sd + 0.05 * K / R, tdf
+    assert vm.effect_for("motor.phase_resistance") not in {f["effect"] for f in rep.findings}
+    clean_rep = pipeline.diagnose(_signals(friction_log, p), p)
+    assert "torque_dependent_friction" not in clean_rep.compare["voltage_mode"]["combinations"]

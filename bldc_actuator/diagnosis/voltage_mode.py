@@ -568,6 +568,26 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
             reason = f"suspected, not identifiable (sd {s:.3g} > {max_relative_uncertainty:g} x |{value:.3g}|)"
         term = Term(effect, par, unc, un, ho, float(dbic), not reason, reason, simrec)
         (rejected if reason else findings).append(term)
+    outside = _torque_dependent_friction(cols, base, keys(free), final, K, n, test, train, nominal["k_over_r"])
+    if outside is not None:
+        combos["torque_dependent_friction"] = outside
+        kr_with = outside["k_over_r_with_it"]
+        if kr_with is not None:
+            notes.append(f"while motoring a torque-dependent friction is the same column as K_t/R (it lowers the "
+                         f"fitted K_t/R by 1 - mu); with it, K_t/R = {kr_with[0]:.4g} ± {kr_with[1]:.2g} N*m/V "
+                         f"(nominal {nominal['k_over_r']:.4g}): told apart only where the motor brakes")
+            if abs(kr_with[0] - nominal["k_over_r"]) <= max(tolerance * nominal["k_over_r"], 3 * kr_with[1]):
+                kr_effect = effect_for(fields["k_over_r"])
+                for f in [f for f in findings if f.effect == kr_effect]:
+                    findings.remove(f)
+                    f.accepted = False
+                    f.reason = ("explained by the torque-dependent friction (K_t/R with it is consistent with "
+                                "nominal): the two are one column while motoring")
+                    rejected.append(f)
+        notes.append(f"outside the catalogue: a friction growing with the transmitted torque (gear friction), "
+                     f"mu = {outside['value']:.3g} ± {outside['sd']:.2g} of |K_t i| (dBIC {outside['delta_bic']:.0f}, "
+                     f"held-out torque RMS {outside['held_out_before']:.3g} -> {outside['held_out_after']:.3g} N*m); "
+                     f"not written to the parameter file (the model has no such term)")
     if combos["viscous_damping"]["value"] < -3 * combos["viscous_damping"]["sd"]:
         notes.append("the damping fitted is below K_t^2/R of the nominal K_t: K_t or R nominal is off (without "
                      "current they are not separated)")
@@ -575,6 +595,33 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
                              {"metric": "torque_rms", "unit": "N*m", "nominal": heldout(["offset"]),
                               "after": heldout(free)}, sim, lagged, n,
                              {k: final[k] for k in ("k_over_r", "damping", "coulomb", "offset", "load_sin", "load_cos")})
+
+
+def _torque_dependent_friction(cols, base, free_keys, final, K, n, test, train, nominal_kr) -> dict | None:
+    """A friction that grows with the transmitted torque, μ |K i| sign(ω) (the gear's load-dependent friction,
+    which no catalogued effect holds), tested on top of the final model: its column from the final model's
+    electromagnetic torque; reported when ΔBIC > the gate and the held-out equation error improves."""
+    tau_em = final["k_over_r"] * (cols["k_over_r"] + K * cols["damping"])      # K i = (K/R)(v - K ω)
+    col = cols["coulomb"] * np.abs(tau_em)
+    X0 = np.column_stack([cols[k] for k in free_keys])
+    X1 = np.column_stack([X0, col])
+    out = []
+    for X in (X0, X1):
+        c_, cov_, r_ = _lstsq(X, base)
+        ct, _, _ = _lstsq(X[train], base[train])
+        out.append((c_, cov_, float(r_ @ r_), float(np.sqrt(np.mean((base[test] - X[test] @ ct) ** 2)))))
+    dbic = _bic(out[0][2], n, X0.shape[1]) - _bic(out[1][2], n, X1.shape[1])
+    if not (dbic > BIC_GATE and out[1][3] < out[0][3]):
+        return None
+    mu, var = float(out[1][0][-1]), float(out[1][1][-1, -1])
+    kr = None
+    if "k_over_r" in free_keys:
+        i = free_keys.index("k_over_r")
+        kr = (nominal_kr + float(out[1][0][i]), float(math.sqrt(max(out[1][1][i, i], 0.0))))
+    return {"k_over_r_with_it": kr, "value": mu, "sd": math.sqrt(var) if var >= 0 else float("nan"), "unit": "", "nominal": 0.0,
+            "what": "mu: friction per newton-metre transmitted, mu |K_t i| sign(omega) (outside the catalogue)",
+            "identifiable": "identified (independent of J)", "delta_bic": float(dbic),
+            "held_out_before": out[0][3], "held_out_after": out[1][3]}
 
 
 def updated_params(params, result: VoltageModeResult):
@@ -620,6 +667,12 @@ def report(signals, params, res: VoltageModeResult, options, say, t_start: float
                  "heldout_gain": (x.held_out.get("before") or 0) - (x.held_out.get("after") or 0)}
                 for x in res.rejected]
     reasons = [] if res.held_out else [Undecidable("too_few_samples", "; ".join(res.notes[-1:]), "record longer")]
+    tdf = res.combinations.get("torque_dependent_friction")
+    if tdf is not None:
+        reasons.append(Undecidable("outside_catalogue",
+                                   f"a friction growing with the transmitted torque (mu = {tdf['value']:.3g} ± "
+                                   f"{tdf['sd']:.2g}) is outside the catalogue",
+                                   "model the gear's load-dependent friction (mu |tau| sign(omega))"))
     rec = decide([f["effect"] for f in findings], reasons)
     notes = [f"data: {n}" for n in ((getattr(signals, "meta", None) or {}).get("notes") or [])] + list(res.notes)
     for name, cmb in res.combinations.items():
