@@ -698,5 +698,5 @@ def report(signals, params, res: VoltageModeResult, options, say, t_start: float
         setup={"rate_hz": (getattr(signals, "meta", {}) or {}).get("rate_hz"), "samples": int(len(signals.time)),
                "holdout": f"{options.holdout:g} of the samples (interleaved blocks)",
                "effects_tested": [effect_for(f) for f in ("motor.phase_resistance", "motor.viscous_damping",
-                                                           "effects.coulomb_friction")],
+                                                           "effects.coulomb_friction", "load.gravity_torque")],
                "source": getattr(signals, "source", "")})
