@@ -346,11 +346,13 @@ def _gravity(a: float, b: float, cov: np.ndarray, idx: dict) -> tuple[float, flo
     return g, float(math.sqrt(max(jg @ C @ jg, 0.0))), ph, float(math.sqrt(max(jp @ C @ jp, 0.0)))
 
 
+COULOMB_FIELD = "effects.coulomb_friction"   #: the parameter-file field of the Coulomb friction (its name there)
+
 #: the combinations: key -> (parameter name, unit, what it is)
 COMBINATIONS = {
     "k_over_r": ("torque_constant_over_resistance", "N*m/V", "K_t/R: torque per volt at standstill"),
     "damping": ("back_emf_plus_viscous", "N*m*s/rad", "K_t*K_e/R + b: the speed's damping (back-EMF and viscous)"),
-    "coulomb": ("coulomb_friction", "N*m", "tau_c: Coulomb friction at the motor side"),
+    "coulomb": (COULOMB_FIELD.rsplit(".", 1)[-1], "N*m", "tau_c: Coulomb friction at the motor side"),
 }
 
 
@@ -518,7 +520,7 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
            "updated": float(np.sqrt(np.mean(err_final ** 2))) if len(wins) else None}
 
     fields = {"k_over_r": "motor.phase_resistance", "damping": "motor.viscous_damping",
-              "coulomb": "effects.coulomb_friction", "load": "load.gravity_torque"}
+              "coulomb": COULOMB_FIELD, "load": "load.gravity_torque"}
     findings, rejected = [], []
     for k in terms:
         effect = effect_for(fields[k])
@@ -630,8 +632,9 @@ def updated_params(params, result: VoltageModeResult):
     upd = {}
     for f in result.findings:
         p = f.parameters
-        if "coulomb_friction" in p:
-            upd["effects.coulomb_friction"] = max(0.0, p["coulomb_friction"])
+        name = COULOMB_FIELD.rsplit(".", 1)[-1]
+        if name in p:
+            upd[COULOMB_FIELD] = max(0.0, p[name])
         if "viscous_damping_given_nominal_K" in p:
             upd["motor.viscous_damping"] = max(0.0, p["viscous_damping_given_nominal_K"])
         if "phase_resistance_given_nominal_K" in p and p["phase_resistance_given_nominal_K"] > 0:
