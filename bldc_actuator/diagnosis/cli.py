@@ -110,10 +110,8 @@ def run(args) -> int:
 
         mapping = Mapping.from_yaml(args.map_file) if args.map_file else Mapping()
         extra = Mapping.parse(args.map)
-        mapping.columns.update(extra.columns)
-        mapping.scale.update(extra.scale)
-        mapping.offset.update(extra.offset)
-        if not mapping.columns:
+        mapping.update(extra)
+        if not mapping.has_columns:
             mapping = None
     except ValueError as exc:
         return _fail(str(exc))

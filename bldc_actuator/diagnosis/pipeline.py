@@ -88,14 +88,19 @@ def _progress(options: DiagnoseOptions) -> Callable[[str], None]:
 
 FULL = "equation error + simulation"
 TORQUE_BALANCE = "torque balance"
+VOLTAGE_MODE = "voltage mode"
 
 
 def route(signals) -> str:
     """Which route diagnoses ``signals``: :data:`TORQUE_BALANCE` when torque and motion are logged but no
-    current (:func:`.torque_balance.applicable`), else :data:`FULL`."""
-    from . import torque_balance
+    current (:func:`.torque_balance.applicable`), :data:`VOLTAGE_MODE` when voltage and motion are logged but no
+    current (:func:`.voltage_mode.applicable`: the mechanical equation closed by i = (v - K ω)/R), else
+    :data:`FULL`."""
+    from . import torque_balance, voltage_mode
 
-    return TORQUE_BALANCE if torque_balance.applicable(signals) else FULL
+    if torque_balance.applicable(signals):
+        return TORQUE_BALANCE
+    return VOLTAGE_MODE if voltage_mode.applicable(signals) else FULL
 
 
 def diagnose(signals, params: ActuatorParams, *, options: DiagnoseOptions | None = None) -> DiagnosisReport:
@@ -104,9 +109,24 @@ def diagnose(signals, params: ActuatorParams, *, options: DiagnoseOptions | None
     stages and :class:`DiagnosisReport` for the result (one schema on both routes)."""
     options = options or DiagnoseOptions()
     with SingleThreadedBLAS():
-        if route(signals) == TORQUE_BALANCE:
+        which = route(signals)
+        if which == TORQUE_BALANCE:
             return _torque_balance(signals, params, options)
+        if which == VOLTAGE_MODE:
+            return _voltage_mode(signals, params, options)
         return _diagnose(signals, params, options)
+
+
+def _voltage_mode(signals, params: ActuatorParams, options: DiagnoseOptions) -> DiagnosisReport:
+    from . import voltage_mode
+
+    say = _progress(options)
+    t_start = time.perf_counter()
+    say(f"1/6 prepare: voltage and motion logged, no current: the voltage-mode route ({len(signals.time)} samples)")
+    res = voltage_mode.diagnose(signals, params, holdout=options.holdout, tolerance=options.tolerance,
+                                max_relative_uncertainty=options.max_relative_uncertainty)
+    say(f"4/6 attribute: accepted {[f.effect for f in res.findings] or 'nothing'}")
+    return voltage_mode.report(signals, params, res, options, say, t_start)
 
 
 def _torque_balance(signals, params: ActuatorParams, options: DiagnoseOptions) -> DiagnosisReport:

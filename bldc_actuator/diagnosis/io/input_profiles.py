@@ -30,6 +30,8 @@ that declares, for one log format:
 ``aux``           extra non-canonical columns kept in ``meta["aux"]``
 ``from_file_name`` channel -> regex with one group: a constant channel read from the file name
 ``companion``     a second file beside the first that supplies one channel (joined by time)
+``format``        ``csv`` (default), ``mcap`` or ``json`` (a list of records, JSON Lines or an object of arrays,
+                  :mod:`.jsonio`: its keys are the header a ``signature`` names, its columns what ``columns`` map)
 ``quirks``        generic operations (:mod:`.quirks`): sign alignment, masking, relabelled columns
 ``semantics``, ``notes``, ``description``, ``licence``, ``source``, ``hints``, ``clean_limits``,
 ``steady_state_points``  carried into ``Signals.meta`` for the report and for cleaning.
@@ -48,8 +50,9 @@ import numpy as np
 
 from ..signals import DataIssue, Signals
 from . import quirks as _quirks
+from . import jsonio
 from .csvio import load_csv
-from .mapping import TARGETS, LoadError, Mapping
+from .mapping import TARGETS, Expression, LoadError, Mapping, compile_expression
 
 #: unit -> (scale, offset) to SI (value_SI = scale * value + offset); ``erpm`` needs the pole pairs
 UNITS: dict[str, tuple[float, float]] = {
@@ -132,8 +135,8 @@ class InputProfile:
 
     def validate(self) -> None:
         where = self.path or self.name
-        if self.format not in ("csv", "mcap"):
-            raise ProfileError(f"{where}: format: expected csv or mcap, got {self.format!r}")
+        if self.format not in ("csv", "mcap", "json"):
+            raise ProfileError(f"{where}: format: expected csv, mcap or json, got {self.format!r}")
         for ch in list(self.columns) + list(self.optional) + list(self.units) + list(self.side):
             if ch not in TARGETS:
                 raise ProfileError(f"{where}: {ch!r} is not a canonical channel (known: {', '.join(TARGETS)})")
@@ -159,7 +162,7 @@ class InputProfile:
         if self.format == "mcap":
             return head.topics is not None and all(any(t == x or t.endswith("/" + x.lstrip("/")) for t in head.topics)
                                                    for x in sig.get("topics_have", []))
-        if head.topics is not None:
+        if head.topics is not None or (self.format == "json") != head.json:
             return False
         if sig.get("headerless"):
             if not head.headerless:
@@ -235,6 +238,7 @@ class FileHead:
     lines: list[str]
     delimiter: str = ","
     topics: list[str] | None = None
+    json: bool = False       #: a JSON log, its keys as the header (:func:`.jsonio.header`)
 
     @classmethod
     def read(cls, path: Path, n: int = 8) -> "FileHead":
@@ -242,6 +246,11 @@ class FileHead:
             from .mcapio import mcap_topics
 
             return cls([], topics=list(mcap_topics(path)))
+        if path.suffix.lower() in jsonio.SUFFIXES:
+            try:
+                return cls(jsonio.header(path, n), ",", json=True)
+            except LoadError:
+                return cls([], ",", json=True)
         lines: list[str] = []
         try:
             with open(path, newline="", encoding="utf-8-sig", errors="replace") as f:
@@ -328,9 +337,14 @@ def _alternatives(spec) -> list[tuple[str, str | None]]:
 
 
 def _column_exists(expr: str, header: set[str], headerless: bool, width: int) -> bool:
-    from .mapping import parse_expression
-
-    src = parse_expression(expr)[0]
+    try:
+        form = compile_expression(expr)
+    except ValueError:
+        return False
+    if isinstance(form, Expression):
+        return all(_column_exists(f'"{c}"' if not c.startswith("#") else c, header, headerless, width)
+                   for c in form.columns)
+    src = form[0]
     if src.startswith("#") and src[1:].lstrip("-").isdigit():
         k = int(src[1:])
         return -width <= k < width
@@ -351,9 +365,19 @@ def read(path: str | Path, profile: InputProfile, params=None, joint: str | None
     """Read ``path`` as ``profile`` says; the result is raw (run :func:`.cleaning.clean` next). ``overrides``
     (``--map``): channels read from these expressions instead of the profile's (canonical units and side, as
     every ``--map``; ``{j}`` in a column name is the chosen joint's id), the profile's other channels kept."""
-    overrides = overrides if overrides is not None and overrides.columns else None
+    overrides = overrides if overrides is not None and overrides.has_columns else None
     path = Path(path)
     where = f"{path}: profile {profile.name}"
+    if path.suffix.lower() in jsonio.SUFFIXES:
+        if profile.format != "json":
+            raise LoadError(f"{where}: the profile reads {profile.format} files, this is a JSON log (give a profile "
+                            f"with format: json)")
+        with jsonio.as_csv(path) as (tmp, table):
+            sig = _read_table(tmp, profile, params, joint, overrides, f"{path}: profile {profile.name}")
+        jsonio.finish(sig, path, table)
+        return sig
+    if profile.format == "json":
+        raise LoadError(f"{where}: the profile reads JSON logs ({', '.join(jsonio.SUFFIXES)}), not {path.suffix}")
     if profile.format == "mcap":
         from .mcapio import load_mcap
 
@@ -362,7 +386,11 @@ def read(path: str | Path, profile: InputProfile, params=None, joint: str | None
             m.add(ch, _alternatives(spec)[0][0])
         sig = load_mcap(path, m, params=params)
         return _finish(sig, path, profile, params, joint, where)
+    return _read_table(path, profile, params, joint, overrides, where)
 
+
+def _read_table(path: Path, profile: InputProfile, params, joint, overrides: Mapping | None, where: str) -> Signals:
+    """A CSV (or a JSON log written as one) read as ``profile`` says."""
     head = FileHead.read(path)
     skip = int(profile.layout.get("skip_lines", 0))
     header_list = head.header_at(skip) or []
@@ -392,7 +420,7 @@ def read(path: str | Path, profile: InputProfile, params=None, joint: str | None
 
     mapping, sides = Mapping(), {}
     for ch, spec in columns.items():
-        if overrides is not None and ch in overrides.columns:
+        if overrides is not None and (ch in overrides.columns or ch in overrides.combined):
             continue
         alts = _alternatives(spec)
         hit = next(((e, s) for e, s in alts if _column_exists(e, header, headerless, width)), None)
@@ -422,6 +450,9 @@ def read(path: str | Path, profile: InputProfile, params=None, joint: str | None
             mapping.scale[ch] = overrides.scale.get(ch, 1.0)
             mapping.offset[ch] = overrides.offset.get(ch, 0.0)
             sides[ch] = "motor"
+        for ch, e in overrides.combined.items():
+            mapping.combined[ch] = Expression.parse(e.text.replace("{j}", jid_))
+            sides[ch] = "motor"
         if "time" in overrides.columns:
             time_spec = {k: v for k, v in time_spec.items() if k != "column"}
     if "column" in time_spec and (overrides is None or "time" not in overrides.columns):
@@ -432,8 +463,13 @@ def read(path: str | Path, profile: InputProfile, params=None, joint: str | None
                             f"(columns: {', '.join(header_list)})")
         mapping.add("time", _normalise_negative_index(hit, width))
     rate = time_spec.get("rate_hz") or (1.0 if time_spec.get("index") else None)
-    sig = load_csv(path, mapping, params, aux=aux, only_mapped=True, skip_lines=skip,
-                   units_row=bool(profile.layout.get("units_row")), time_rate=rate)
+    combined = dict(mapping.combined)
+    if combined and not (set(mapping.columns) - {"time"}):      # load_csv wants one single-column channel
+        ch0, e0 = next(iter(combined.items()))
+        mapping.columns[ch0] = e0.columns[0]
+    sig = load_csv(path, mapping, params, aux={**aux, **mapping.combined_sources()}, only_mapped=True,
+                   skip_lines=skip, units_row=bool(profile.layout.get("units_row")), time_rate=rate)
+    mapping.apply_combined(sig, header_list, where)
     if time_spec.get("rate_hz"):
         sig.meta["semantics"]["time"] = f"SYNTHESISED at {float(time_spec['rate_hz']):g} Hz (no time column)"
         sig.meta["notes"].append(f"time synthesised at {float(time_spec['rate_hz']):g} Hz: the file has no time column")
@@ -447,11 +483,13 @@ def read(path: str | Path, profile: InputProfile, params=None, joint: str | None
         t0 = float(sig.time[0])
         sig.time = sig.time - t0
         sig.meta["time_offset_s"] = t0
-    _units(sig, profile, params, where, skip=set(overrides.columns) if overrides is not None else set())
+    _units(sig, profile, params, where,
+           skip=set(overrides.columns) | set(overrides.combined) if overrides is not None else set())
     _sides(sig, profile, params, sides, where)
     if overrides is not None:
         sig.meta["notes"].append("--map over the input profile: " + ", ".join(
-            f"{ch}={sig.meta['mapping'].get(ch, src)}" for ch, src in overrides.columns.items()))
+            f"{ch}={sig.meta['mapping'].get(ch, src)}" for ch, src in
+            {**overrides.columns, **{c: e.text for c, e in overrides.combined.items()}}.items()))
     return _finish(sig, path, profile, params, joint, where)
 
 

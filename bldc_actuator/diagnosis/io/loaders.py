@@ -10,6 +10,9 @@
    matches — the chosen profile is in ``meta["profile"]`` and printed by the CLI;
 5. otherwise an error that says what to map.
 
+JSON logs (a list of records, JSON Lines, an object of arrays: :mod:`.jsonio`) take the same five steps: their
+keys are the header, a profile with ``format: json`` names them, ``--map`` expressions combine them.
+
 Loaders only translate; they never mask or drop samples (except rows with nothing parseable and what a
 profile's quirks mask, which are reported). Problems are found and reported by :func:`.cleaning.clean`.
 """
@@ -22,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from ..signals import CANONICAL, DataIssue, Signals
-from . import input_profiles
+from . import input_profiles, jsonio
 from .csvio import load_csv
 from .mapping import TARGETS, LoadError, Mapping, parse_expression
 from .mcapio import load_mcap, mcap_topics
@@ -32,6 +35,12 @@ __all__ = ["load", "load_many", "joints", "load_csv", "load_mcap", "Mapping", "L
 
 
 def _has_canonical_header(path: Path) -> bool:
+    if path.suffix.lower() in jsonio.SUFFIXES:
+        try:
+            names = set(jsonio.read_table(path).keys)
+        except LoadError:
+            return False
+        return "time" in names and bool(names & set(CANONICAL))
     try:
         with open(path, newline="", encoding="utf-8-sig", errors="replace") as f:
             for line in f:
@@ -87,10 +96,14 @@ def load(path: str | Path, *, mapping: Mapping | None = None, params=None, joint
     if not path.exists():
         raise LoadError(f"{path}: no such file")
     suffix = path.suffix.lower()
-    if suffix not in (".csv", ".tsv", ".txt", ".mcap"):
-        raise LoadError(f"{path}: unknown recording type {suffix!r} (expected .csv, .tsv, .txt or .mcap)")
-    if mapping is not None and mapping.columns:
+    if suffix not in (".csv", ".tsv", ".txt", ".mcap") + jsonio.SUFFIXES:
+        raise LoadError(f"{path}: unknown recording type {suffix!r} (expected .csv, .tsv, .txt, .mcap or "
+                        f"{', '.join(jsonio.SUFFIXES)})")
+    if mapping is not None and mapping.has_columns:
         if suffix == ".mcap":
+            if mapping.combined:
+                raise LoadError(f"{path}: --map {', '.join(f'{t}={e.text}' for t, e in mapping.combined.items())}"
+                                f": expressions over several columns apply to CSV and JSON logs, not MCAP topics")
             return load_mcap(path, mapping=mapping, params=params, joint=joint)
         if joint is not None or profile is not None:
             # --map over a profile (--profile, or the one --joint needs): the profile reads the joint, the map
@@ -103,7 +116,7 @@ def load(path: str | Path, *, mapping: Mapping | None = None, params=None, joint
             sig.meta["profile_how"] = ("given (--profile)" if profile is not None else
                                        "auto-detected from the header") + ", with --map over it"
             return sig
-        return load_csv(path, mapping=mapping, params=params)
+        return _table(path, mapping, params)
     prof = resolve_profile(path, profile)
     if prof is not None:
         sig = input_profiles.read(path, prof, params=params, joint=joint)
@@ -118,7 +131,26 @@ def load(path: str | Path, *, mapping: Mapping | None = None, params=None, joint
         raise LoadError(f"{path}: no input profile recognises this file and its header names no canonical "
                         f"channel: give --profile FILE (a YAML profile, see docs/realdata.md; shipped: {shipped}) "
                         f"or map the columns, e.g. --map time=t --map current=iq")
-    return load_csv(path, mapping=mapping, params=params)
+    return _table(path, mapping, params)
+
+
+def _table(path: Path, mapping: Mapping | None, params) -> Signals:
+    """A CSV (or a JSON log, as its table) read with ``mapping``: single-column targets by :func:`load_csv`, the
+    combined expressions over the columns they name (read alongside, then evaluated)."""
+    if path.suffix.lower() in jsonio.SUFFIXES:
+        with jsonio.as_csv(path) as (tmp, table):
+            sig = _table(tmp, mapping, params)
+        jsonio.finish(sig, path, table)
+        return sig
+    if mapping is None or not mapping.combined:
+        return load_csv(path, mapping=mapping, params=params)
+    simple = Mapping(dict(mapping.columns), dict(mapping.scale), dict(mapping.offset))
+    if not (set(simple.columns) - {"time"}):           # load_csv wants one single-column channel to read
+        t0, e0 = next(iter(mapping.combined.items()))
+        simple.columns[t0] = e0.columns[0]
+    sig = load_csv(path, mapping=simple, params=params, aux=mapping.combined_sources())
+    mapping.apply_combined(sig, where=str(path))
+    return sig
 
 
 def load_many(paths: list[str | Path], *, params=None, profile=None) -> Signals:
