@@ -23,6 +23,9 @@ class Route(enum.Enum):
     THERMAL = "thermal"              #: the thermal network's output error (frame.thermal)
     VOLTAGE_LIMIT = "voltage_limit"  #: the drive's fitted voltage limit (frame.voltage_limit, judged by replay)
     DRIVE_MODE = "drive_mode"        #: the drive's voltage-limit mode, by simulation only (judge.drive_modes)
+    #: the drive's current-controller form and feed-forward, by the closed-loop replay before anything is judged
+    #: (diagnosis.drive_feedforward); found by the pipeline itself, never a candidate a run is asked to test
+    DRIVE_FORM = "drive_form"
 
 
 class Story(enum.Enum):
@@ -108,6 +111,12 @@ class Effect:
 
     def __post_init__(self):
         object.__setattr__(self, "confusable", MappingProxyType(dict(self.confusable)))
+
+    @property
+    def candidate(self) -> bool:
+        """One of the candidate effects a run tests (``--effects``, frame.candidates.library); the drive's own form
+        is identified by the pipeline in every run instead."""
+        return self.route is not Route.DRIVE_FORM
 
     @property
     def special(self) -> bool:

@@ -51,6 +51,11 @@ def names(effects: Iterable[Effect] | None = None) -> tuple[str, ...]:
     return tuple(e.name for e in (all() if effects is None else effects))
 
 
+def candidates() -> tuple[Effect, ...]:
+    """The candidate effects (every effect but those the pipeline identifies on its own), in catalogue order."""
+    return where(lambda e: e.candidate)
+
+
 def get(name: str) -> Effect:
     """The effect called ``name``; KeyError naming the known ones otherwise."""
     try:

@@ -529,6 +529,14 @@ def v_single(effect, cols, label="", **kw):
     return lambda ctx, loc: [Variant(effect, label or effect, cols, **kw)]
 
 
+@dataclass(frozen=True)
+class Single:
+    """A form table entry (:func:`_forms`): the effect's one form, these columns (made into :func:`v_single` of
+    the effect's own name by :func:`library`)."""
+
+    columns: dict[str, Callable]
+
+
 def v_stribeck(ctx, loc):
     w = np.abs(ctx.dsig("omega_s"))
     moving = w[w > 2 * ctx.omega_eps]
@@ -1138,37 +1146,37 @@ def _forms() -> dict[str, tuple]:
     """Each effect's code on the frame's side: (variants, excitation test, parameter mapping, undecided reason);
     everything else about it is its registry record (:mod:`..effects`)."""
     return {
-        "coulomb_friction": (v_single("coulomb_friction", {"fric_sign": col_fric_sign}), excite_friction,
+        "coulomb_friction": (Single({"fric_sign": col_fric_sign}), excite_friction,
                              params_friction, None),
-        "asymmetric_friction": (v_single("asymmetric_friction", {"fric_sign": col_fric_sign, "fric_abs": col_fric_abs}),
+        "asymmetric_friction": (Single({"fric_sign": col_fric_sign, "fric_abs": col_fric_abs}),
                                 excite_friction, params_friction, None),
         "stribeck_friction": (v_stribeck, excite_stribeck, params_friction, None),
-        "viscous_friction": (v_single("viscous_friction", {"visc": col_viscous}), excite_viscous,
+        "viscous_friction": (Single({"visc": col_viscous}), excite_viscous,
                              params_generic({"visc": ("viscous_damping", "N*m*s/rad", "motor.viscous_damping",
                                                       _flat("motor.viscous_damping"))}), None),
         "cogging_torque": (v_cogging, excite_angle(lambda p: 2 * p.motor.pole_pairs), params_cogging, None),
         "electrical_angle_ripple": (v_eripple, excite_angle(lambda p: p.motor.pole_pairs), params_eripple, None),
         "position_dependent_load": (v_load, excite_load, params_load, None),
         "torque_constant_error": (v_kt, None, params_kt, None),
-        "inertia_error": (v_single("inertia_error", {"inertia": col_inertia}), excite_inertia,
+        "inertia_error": (Single({"inertia": col_inertia}), excite_inertia,
                           params_generic({"inertia": ("rotor_inertia", "kg*m^2", "motor.rotor_inertia",
                                                       _flat("motor.rotor_inertia"))}), None),
         "transmission_compliance": (v_compliance, excite_compliance, params_compliance, None),
         "backlash": (v_backlash, excite_backlash, params_backlash, None),
-        "resistance_error": (v_single("resistance_error", {"r_err": col_r_err}), None,
+        "resistance_error": (Single({"r_err": col_r_err}), None,
                              params_generic({"r_err": ("phase_resistance", "ohm", "motor.phase_resistance",
                                                        _flat("motor.phase_resistance"))}), None),
-        "inductance_error": (v_single("inductance_error", {"l_err": col_l_err}), None,
+        "inductance_error": (Single({"l_err": col_l_err}), None,
                              params_generic({"l_err": ("q_inductance", "H", "motor.q_inductance",
                                                        _flat("motor.q_inductance"))}), None),
-        "resistance_temperature": (v_single("resistance_temperature", {"r_temp": col_r_temp}), excite_temperature,
+        "resistance_temperature": (Single({"r_temp": col_r_temp}), excite_temperature,
                                    params_r_temp, None),
-        "magnet_temperature": (v_single("magnet_temperature", {"magnet": col_magnet}), excite_temperature,
+        "magnet_temperature": (Single({"magnet": col_magnet}), excite_temperature,
                                params_magnet, None),
-        "magnetic_saturation": (v_single("magnetic_saturation", {"sat": col_saturation}), excite_saturation,
+        "magnetic_saturation": (Single({"sat": col_saturation}), excite_saturation,
                                 params_saturation, None),
         "dead_time": (v_dead_time, excite_dead_time, params_dead_time, dead_time_in_band),
-        "current_loop_delay": (v_single("current_loop_delay", {"delay": col_delay}), None, params_delay, None),
+        "current_loop_delay": (Single({"delay": col_delay}), None, params_delay, None),
     }
 
 
@@ -1177,19 +1185,21 @@ def library() -> dict[str, Candidate]:
     its record (:mod:`..effects.registry`) and its forms (:func:`_forms`)."""
     forms = _forms()
     out = {}
-    for e in registry.all():
+    for e in registry.candidates():
         variants, excited, to_params, undecided = forms.get(e.name, (None, None, None, None))
+        if isinstance(variants, Single):
+            variants = v_single(e.name, variants.columns)
         out[e.name] = Candidate(e.name, e.equations, e.needs, e.description, e.simulated, dict(e.confusable),
                                 variants, excited, to_params, hides_behind=e.hides_behind, undecided_why=undecided,
                                 record=e)
     return out
 
 
-EFFECT_NAMES = registry.names()
+EFFECT_NAMES = registry.names(registry.candidates())
 #: found by the thermal network's output error, not the linear selection
 THERMAL = registry.names(registry.by_route(Route.THERMAL))
 #: checked by output-error routines and the simulation, not the linear selection
-SPECIAL = registry.names(registry.where(lambda e: e.special))
+SPECIAL = registry.names(registry.where(lambda e: e.special and e.candidate))
 
 
 # ------------------------------------------------------------------------------------------ evidence
@@ -1266,39 +1276,37 @@ def evidence(effect: str, variant: Variant, loc: dict, extra: dict) -> list[str]
     numbers. ``extra``: ``explained`` (share of the nominal residual variance its columns explain),
     ``dbic``, ``heldout``."""
     out: list[str] = []
-    if effect in ("coulomb_friction", "asymmetric_friction", "stribeck_friction", "viscous_friction"):
+    record = registry.get(effect) if registry.known(effect) else None
+    story = record.story if record is not None else Story.NONE
+    if story is Story.VELOCITY:
         s = _velocity_story(loc)
         if s:
             out.append(s)
-    elif effect in ("cogging_torque", "electrical_angle_ripple"):
+    elif story is Story.ANGLE_SPECTRUM:
         s = _spectrum_story(loc, int(variant.hyper["order"]))
         if s:
             out.append(s)
-    elif effect in ("torque_constant_error", "magnetic_saturation"):
+    elif story is Story.CURRENT_TREND:
         for eq in ("mechanical", "electrical"):
             s = _trend_story(loc, eq, "current", "|current|")
             if s:
                 out.append(s)
-    elif effect in ("resistance_temperature", "magnet_temperature"):
+    elif story is Story.TEMPERATURE_TREND:
         for eq in ("electrical", "mechanical"):
             s = _trend_story(loc, eq, "temperature", "temperature")
             if s:
                 out.append(s)
-    elif effect == "voltage_saturation":
+    elif story is Story.HEADROOM:
         s = _trend_story(loc, "electrical", "headroom", "voltage headroom |v|/v_max")
         if s:
             out.append(s)
-    elif effect in ("dead_time", "resistance_error", "inductance_error", "current_loop_delay"):
+    elif story is Story.ELECTRICAL_CURRENT_TREND:
         s = _trend_story(loc, "electrical", "current", "|current|")
-        if s:
-            out.append(s)
-    elif effect == "position_dependent_load":
-        s = _velocity_story(loc)
         if s:
             out.append(s)
     for eq in ("mechanical", "electrical"):
         wins = (loc.get(eq) or {}).get("windows") or []
-        if wins and effect in ("resistance_temperature", "magnet_temperature", "thermal_parameters", "iron_loss"):
+        if wins and record is not None and record.level_windows:
             w = max(wins, key=lambda x: x["ratio_to_quietest"])
             out.append(f"{eq} residual changes level at t = {w['start']:.1f}-{w['stop']:.1f} s "
                        f"({w['ratio_to_quietest']:.1f}x the quietest segment)")
