@@ -99,3 +99,16 @@ def test_every_effect_module_is_named_after_its_effect_and_its_facets_are_consis
         for _, path in e.nominal:
             assert path in SPECS, (e.name, path)
         assert e.special == (e.equations[0] in ("thermal", "tracking")), e.name
+
+
+def test_every_linear_candidate_has_its_forms_and_no_other_effect_is_searched_linearly():
+    from bldc_actuator.diagnosis.effects import Route
+    from bldc_actuator.diagnosis.frame import candidates
+
+    lib = candidates.library()
+    assert tuple(lib) == registry.names(registry.candidates())
+    for name, cand in lib.items():
+        linear = registry.get(name).route is Route.LINEAR
+        assert (cand.variants is not None) == linear, name
+        assert cand.record is registry.get(name)
+    assert set(candidates.SPECIAL) == {n for n in lib if registry.get(n).special}
