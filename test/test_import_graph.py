@@ -102,7 +102,7 @@ D = "bldc_actuator.diagnosis"
 #: the method's stages, each a package whose ``stage`` module is its one entry point (issue #14)
 STAGES = ("search", "judge", "fit", "report")
 #: what the shared frame (equation error, effect library, selection, window replays) may use within the diagnosis
-FRAME_MAY_USE = ("frame", "io", "signals", "significance", "results", "threads")
+FRAME_MAY_USE = ("frame", "io", "signals", "significance", "results", "threads", "effects")
 
 
 def _top(mod: str) -> str:
@@ -150,3 +150,14 @@ def test_diagnosis_stages_import_frame_io_results_never_each_other():
         assert f"{D}.{s}.stage" in g[f"{D}.pipeline"], s
     assert f"{D}.frame.simulate" in g[f"{D}.judge.simulated"]  # the check reads real imports
     assert _layer_violations(g) == []
+
+
+def test_the_effect_registry_sits_below_every_layer():
+    """diagnosis/effects (the effect records and their registry, issue #24) is imported by the frame, the stages
+    and the tools beside them, so it imports nothing of the diagnosis itself."""
+    g = _graph()
+    mods = [m for m in g if m == f"{D}.effects" or m.startswith(f"{D}.effects.")]
+    assert f"{D}.effects.registry" in mods and f"{D}.effects.dead_time" in mods
+    assert f"{D}.effects" in g[f"{D}.frame.candidates"] or f"{D}.effects.registry" in g[f"{D}.frame.candidates"]
+    up = {m: sorted(t for t in g[m] if t.startswith(D + ".") and _top(t) != "effects") for m in mods}
+    assert {m: t for m, t in up.items() if t} == {}

@@ -39,10 +39,12 @@ from typing import Any
 import numpy as np
 
 from ..params import ActuatorParams, current_loop_limit
+from .effects import Route, registry
 from .frame import simulate
 from .judge.drive_modes import drive_replay_unavailable
 
-EFFECT = "drive_current_controller"
+#: the effect this module identifies (its registry record: diagnosis/effects/drive_current_controller.py)
+EFFECT = registry.one(lambda e: e.route is Route.DRIVE_FORM).name
 #: the name the finding had before (reports written then say it; :data:`FORMER_EFFECTS` maps it)
 FORMER_EFFECTS = {"drive_decoupling": EFFECT}
 FIELD = "drive.decoupling_enabled"

@@ -16,21 +16,16 @@ what it returns from the accepted set BEFORE the final fit and the updated param
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import Any
 
 from ..params import ActuatorParams
+from .effects import registry
 
-#: parameter-change effects: (parameter name in the effect's parameters, nominal getter)
-_CHANGES = {
-    "torque_constant_error": ("torque_constant_q", lambda p: p.motor.torque_constant_q),
-    "inertia_error": ("rotor_inertia", lambda p: p.motor.rotor_inertia),
-    "resistance_error": ("phase_resistance", lambda p: p.motor.phase_resistance),
-    "inductance_error": ("q_inductance", lambda p: p.motor.q_inductance),
-}
-_THERMAL = ("winding_to_housing_resistance", "housing_to_ambient_resistance", "winding_heat_capacity",
-            "housing_heat_capacity")
+# parameter-change effects (a changed constant, the thermal network) name the nominal values they move: the
+# registry's ``Effect.nominal``, (parameter name in the effect's parameters, dotted path in ActuatorParams)
 
 
 #: |log(value / nominal)| bound of the thermal network's output-error fit (refit.thermal_select)
@@ -44,16 +39,19 @@ class Verdict:
     message: str
 
 
+def _nominal_value(params: ActuatorParams, path: str) -> float:
+    return functools.reduce(getattr, path.split("."), params)
+
+
+def _nominal_of(effect: str) -> tuple[tuple[str, str], ...]:
+    return registry.get(effect).nominal if registry.known(effect) else ()
+
+
 def _relative_change(effect: str, values: dict[str, float], nominal: ActuatorParams) -> float | None:
-    if effect in _CHANGES:
-        name, get = _CHANGES[effect]
-        v, n = values.get(name), get(nominal)
-        return abs(v / n - 1.0) if v is not None and n else None
-    if effect == "thermal_parameters":
-        th = nominal.thermal
-        ch = [abs(values[f] / getattr(th, f) - 1.0) for f in _THERMAL if f in values and getattr(th, f)]
-        return max(ch) if ch else None
-    return None
+    """The largest relative change among the nominal values a parameter-change effect moves; None for others."""
+    ch = [abs(values[name] / _nominal_value(nominal, path) - 1.0) for name, path in _nominal_of(effect)
+          if name in values and _nominal_value(nominal, path)]
+    return max(ch) if ch else None
 
 
 def judge(effects: dict[str, dict[str, dict[str, Any]]], nominal: ActuatorParams, *, tolerance: float = 0.05,
@@ -70,10 +68,9 @@ def judge(effects: dict[str, dict[str, dict[str, Any]]], nominal: ActuatorParams
                                f"{effect}: consistent with nominal (the fit moves it by {100 * change:.2g} %, below "
                                f"the {100 * tolerance:g} % tolerance)"))
             continue
-        if effect == "thermal_parameters":      # the output-error fit is bounded to [1/10, 10] x nominal
-            th = nominal.thermal
-            pinned = [f for f in _THERMAL if f in values and getattr(th, f)
-                      and abs(math.log(values[f] / getattr(th, f))) > THERMAL_FIT_BOUND_LOG * 0.98]
+        if registry.known(effect) and registry.get(effect).bounded_log_fit:   # fit bounded to [1/10, 10] x nominal
+            pinned = [f for f, path in _nominal_of(effect) if f in values and _nominal_value(nominal, path)
+                      and abs(math.log(values[f] / _nominal_value(nominal, path))) > THERMAL_FIT_BOUND_LOG * 0.98]
             if pinned:
                 out.append(Verdict(effect, "not_identifiable",
                                    f"{effect}: suspected, not identifiable — {', '.join(pinned)} ran to the fit's bound "
@@ -93,7 +90,7 @@ def judge(effects: dict[str, dict[str, dict[str, Any]]], nominal: ActuatorParams
             continue
         # a set of separate claims (thermal network, a changed constant): each must be identified; a series
         # (cogging harmonics, a load's sin/cos/constant): its best-identified term carries it
-        rel, name, v, sd = max(rels) if (effect == "thermal_parameters" or effect in _CHANGES) else min(rels)
+        rel, name, v, sd = max(rels) if _nominal_of(effect) else min(rels)
         if rel > max_relative_uncertainty:
             exp = experiments.get(effect) or "record data that excites it more (longer, larger, more varied)"
             out.append(Verdict(effect, "not_identifiable",

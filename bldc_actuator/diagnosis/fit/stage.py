@@ -13,6 +13,7 @@ from __future__ import annotations
 import time
 
 from ...params import keep_controller_of
+from ..effects import registry
 from . import base_model, output_error
 from ..frame import simulate
 from ..frame import thermal as thermal_net
@@ -49,7 +50,7 @@ def run(s: Search, j: Judgement, options, say: Say) -> Model:
                 f"evaluations; held-out speed RMS {oe['holdout']['equation_error']['velocity_rms']:.3g} -> "
                 f"{oe['holdout']['output_error']['velocity_rms']:.3g} rad/s)")
     special = j.special
-    if not any(f["effect"] == "iron_loss" for f in special["findings"]):
+    if not any(registry.get(f["effect"]).motion_heat for f in special["findings"]):
         special["extra_heat"] = None      # iron-loss heat only with an accepted iron_loss finding
     if special["findings"]:
         params, tnotes, tns = thermal_net.apply_thermal(params, special)

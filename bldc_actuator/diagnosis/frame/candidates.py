@@ -22,6 +22,8 @@ from typing import Any, Callable
 import numpy as np
 
 from ... import effects, frames, kernel
+from ..effects import Effect, Route, Story, registry
+from ..effects.backlash import BACKLASH_EXPERIMENT
 
 #: frame factors a torque-constant error is compared with (fitted K / nominal K): every ratio a K_t read in one
 #: frame and entered as another produces, drives on delta motors included (:func:`frames.torque_constant_frame_factors`)
@@ -74,6 +76,8 @@ class Candidate:
     #: (ctx) -> None | (why, what to do): the candidate's own reason when the held-out gate cannot decide it
     #: (:func:`..selection._gate`), in place of "held-out too short" where the data, not its length, are at fault
     undecided_why: Callable | None = None
+    #: the effect's registry record (every facet the stages ask about)
+    record: Effect | None = None
 
 
 def _smooth_sign(x, eps):
@@ -499,11 +503,6 @@ def excite_compliance(ctx):
                                       f"holds {100 * share:.2g} % of its variance there)")
 
 
-#: what separates a backlash from a softer spring when only the rotor's angle is recorded
-BACKLASH_EXPERIMENT = ("record the load's angle behind the transmission (a load-side encoder, column load_position: "
-                       "the dead zone shows on the measured deflection), or reverse the load at low torque (a slow "
-                       "reversal of the transmission torque: inside the dead zone the rotor runs free of the load, "
-                       "behind a spring it does not)")
 
 
 def excite_backlash(ctx):
@@ -528,6 +527,14 @@ def excite_dead_time(ctx):
 
 def v_single(effect, cols, label="", **kw):
     return lambda ctx, loc: [Variant(effect, label or effect, cols, **kw)]
+
+
+@dataclass(frozen=True)
+class Single:
+    """A form table entry (:func:`_forms`): the effect's one form, these columns (made into :func:`v_single` of
+    the effect's own name by :func:`library`)."""
+
+    columns: dict[str, Callable]
 
 
 def v_stribeck(ctx, loc):
@@ -1135,139 +1142,64 @@ def params_magnet(coef, cov, keys, variant, ctx):
 
 # ------------------------------------------------------------------------------------------ library
 
+def _forms() -> dict[str, tuple]:
+    """Each effect's code on the frame's side: (variants, excitation test, parameter mapping, undecided reason);
+    everything else about it is its registry record (:mod:`..effects`)."""
+    return {
+        "coulomb_friction": (Single({"fric_sign": col_fric_sign}), excite_friction,
+                             params_friction, None),
+        "asymmetric_friction": (Single({"fric_sign": col_fric_sign, "fric_abs": col_fric_abs}),
+                                excite_friction, params_friction, None),
+        "stribeck_friction": (v_stribeck, excite_stribeck, params_friction, None),
+        "viscous_friction": (Single({"visc": col_viscous}), excite_viscous,
+                             params_generic({"visc": ("viscous_damping", "N*m*s/rad", "motor.viscous_damping",
+                                                      _flat("motor.viscous_damping"))}), None),
+        "cogging_torque": (v_cogging, excite_angle(lambda p: 2 * p.motor.pole_pairs), params_cogging, None),
+        "electrical_angle_ripple": (v_eripple, excite_angle(lambda p: p.motor.pole_pairs), params_eripple, None),
+        "position_dependent_load": (v_load, excite_load, params_load, None),
+        "torque_constant_error": (v_kt, None, params_kt, None),
+        "inertia_error": (Single({"inertia": col_inertia}), excite_inertia,
+                          params_generic({"inertia": ("rotor_inertia", "kg*m^2", "motor.rotor_inertia",
+                                                      _flat("motor.rotor_inertia"))}), None),
+        "transmission_compliance": (v_compliance, excite_compliance, params_compliance, None),
+        "backlash": (v_backlash, excite_backlash, params_backlash, None),
+        "resistance_error": (Single({"r_err": col_r_err}), None,
+                             params_generic({"r_err": ("phase_resistance", "ohm", "motor.phase_resistance",
+                                                       _flat("motor.phase_resistance"))}), None),
+        "inductance_error": (Single({"l_err": col_l_err}), None,
+                             params_generic({"l_err": ("q_inductance", "H", "motor.q_inductance",
+                                                       _flat("motor.q_inductance"))}), None),
+        "resistance_temperature": (Single({"r_temp": col_r_temp}), excite_temperature,
+                                   params_r_temp, None),
+        "magnet_temperature": (Single({"magnet": col_magnet}), excite_temperature,
+                               params_magnet, None),
+        "magnetic_saturation": (Single({"sat": col_saturation}), excite_saturation,
+                                params_saturation, None),
+        "dead_time": (v_dead_time, excite_dead_time, params_dead_time, dead_time_in_band),
+        "current_loop_delay": (Single({"delay": col_delay}), None, params_delay, None),
+    }
+
+
 def library() -> dict[str, Candidate]:
-    """Every candidate effect by its identifier (the names used in the JSON report)."""
-    C = {}
-
-    def add(c: Candidate):
-        C[c.name] = c
-
-    mech_needs = ("current", "velocity|position")
-    add(Candidate("coulomb_friction", ("mechanical",), mech_needs,
-                  "Coulomb (dry) friction: a constant torque opposing the motion, a step at zero speed",
-                  True, {"dead_time": "dead time acts on the voltage equation (needs voltage_q); friction on torque",
-                         "asymmetric_friction": "move at the same speeds in both directions"},
-                  v_single("coulomb_friction", {"fric_sign": col_fric_sign}), excite_friction, params_friction))
-    add(Candidate("asymmetric_friction", ("mechanical",), mech_needs,
-                  "direction-dependent friction: different dry friction for positive and negative motion",
-                  True, {"position_dependent_load": "hold still at several angles, or move in both directions over "
-                         "the same angles: a load depends on angle, friction on direction",
-                         "coulomb_friction": "move at the same speeds in both directions"},
-                  v_single("asymmetric_friction", {"fric_sign": col_fric_sign, "fric_abs": col_fric_abs}),
-                  excite_friction, params_friction))
-    add(Candidate("stribeck_friction", ("mechanical",), mech_needs,
-                  "Stribeck friction: extra friction at low speed that fades above the Stribeck velocity",
-                  True, {"coulomb_friction": "slow constant-speed sweeps (0.1-10x the Stribeck velocity)"},
-                  v_stribeck, excite_stribeck, params_friction))
-    add(Candidate("viscous_friction", ("mechanical",), mech_needs,
-                  "viscous damping: friction torque growing in proportion to speed",
-                  True, {"iron_loss": "iron loss also heats the stator: record temperatures at high speed, low current"},
-                  v_single("viscous_friction", {"visc": col_viscous}), excite_viscous,
-                  params_generic({"visc": ("viscous_damping", "N*m*s/rad", "motor.viscous_damping",
-                                           _flat("motor.viscous_damping"))})))
-    add(Candidate("cogging_torque", ("mechanical",), ("current", "position"),
-                  "cogging torque: torque ripple locked to the rotor angle (slots x magnets), present without current",
-                  True, {"electrical_angle_ripple": "repeat at a different current: cogging does not scale with "
-                         "current; sensor-gain ripple does"},
-                  v_cogging, excite_angle(lambda p: 2 * p.motor.pole_pairs), params_cogging))
-    add(Candidate("electrical_angle_ripple", ("mechanical", "electrical"), ("current", "position"),
-                  "torque ripple locked to the ELECTRICAL angle (current-sensor offset at order p, gain mismatch at "
-                  "2p, flux harmonics / dead time at 6p)",
-                  False, {"cogging_torque": "repeat at a different current: cogging does not scale with current"},
-                  v_eripple, excite_angle(lambda p: p.motor.pole_pairs), params_eripple))
-    add(Candidate("position_dependent_load", ("mechanical",), ("current", "position"),
-                  "a load that depends on the output angle (gravity, spring) plus a constant load",
-                  True, {"asymmetric_friction": "hold still at several angles, or move in both directions over the "
-                         "same angles"},
-                  v_load, excite_load, params_load))
-    add(Candidate("torque_constant_error", ("mechanical", "electrical"), ("current", "velocity|position"),
-                  "the torque / back-EMF constant is off (often a frame convention: sqrt(3/2), sqrt(2), sqrt(3)...)",
-                  True, {"inertia_error": "with a torque sensor, a known load, or voltage_q (back-EMF) the two "
-                         "separate; from current and motion alone only K_t/J is known"},
-                  v_kt, None, params_kt))
-    add(Candidate("inertia_error", ("mechanical",), mech_needs,
-                  "the rotor + load inertia is off", True,
-                  {"torque_constant_error": "record voltage_q (back-EMF gives K directly) or a known load / torque "
-                   "sensor"},
-                  v_single("inertia_error", {"inertia": col_inertia}), excite_inertia,
-                  params_generic({"inertia": ("rotor_inertia", "kg*m^2", "motor.rotor_inertia",
-                                              _flat("motor.rotor_inertia"))})))
-    add(Candidate("transmission_compliance", ("mechanical",), mech_needs,
-                  "a compliant transmission (shaft, belt, harmonic drive, series-elastic spring): the load is a second "
-                  "mass on a spring, a two-mass resonance in the rotor's motion", True,
-                  {"inertia_error": "excite near the resonance (a chirp or steps): a rigid inertia error scales the "
-                   "acceleration at every frequency, a compliance only above the anti-resonance",
-                   "current_loop_delay": "a load encoder (joint side) measures the deflection directly"},
-                  v_compliance, excite_compliance, params_compliance))
-    add(Candidate("backlash", ("mechanical",), mech_needs,
-                  "backlash: a dead zone in the transmission (gear play) behind its spring; identified with a load "
-                  "encoder (a form of transmission_compliance), an alias of the compliance from the rotor alone",
-                  True, {"transmission_compliance": BACKLASH_EXPERIMENT},
-                  v_backlash, excite_backlash, params_backlash, hides_behind=("transmission_compliance",)))
-    add(Candidate("resistance_error", ("electrical",), ("voltage_q", "current", "velocity|position"),
-                  "the winding resistance is off (at the reference temperature)", True,
-                  {"resistance_temperature": "hold a current while the winding warms, with winding temperature "
-                   "recorded"},
-                  v_single("resistance_error", {"r_err": col_r_err}), None,
-                  params_generic({"r_err": ("phase_resistance", "ohm", "motor.phase_resistance",
-                                            _flat("motor.phase_resistance"))})))
-    add(Candidate("inductance_error", ("electrical",), ("voltage_q", "current", "velocity|position"),
-                  "the q-axis inductance is off", True,
-                  {"current_loop_delay": "current steps recorded at a higher rate than the current loop"},
-                  v_single("inductance_error", {"l_err": col_l_err}), None,
-                  params_generic({"l_err": ("q_inductance", "H", "motor.q_inductance", _flat("motor.q_inductance"))})))
-    add(Candidate("resistance_temperature", ("electrical",),
-                  ("voltage_q", "current", "velocity|position", "winding_temperature|housing_temperature"),
-                  "winding resistance rising with temperature (copper, about +0.39 %/K)", True,
-                  {"magnet_temperature": "the magnet term also changes the torque and back-EMF; spin unloaded when "
-                   "hot and cold"},
-                  v_single("resistance_temperature", {"r_temp": col_r_temp}), excite_temperature, params_r_temp))
-    add(Candidate("magnet_temperature", ("mechanical", "electrical"),
-                  ("current", "velocity|position", "winding_temperature|housing_temperature"),
-                  "magnet flux (torque and back-EMF constant) falling with temperature (NdFeB about -0.1 %/K)",
-                  True, {"resistance_temperature": "spin unloaded when hot and when cold: only the flux changes the "
-                         "back-EMF"},
-                  v_single("magnet_temperature", {"magnet": col_magnet}), excite_temperature, params_magnet))
-    add(Candidate("magnetic_saturation", ("mechanical",), mech_needs,
-                  "magnetic saturation: torque per amp falls at high current", True,
-                  {"torque_constant_error": "steps to several current levels: saturation only bends the top"},
-                  v_single("magnetic_saturation", {"sat": col_saturation}), excite_saturation, params_saturation))
-    add(Candidate("voltage_saturation", ("tracking",), ("current", "current_command|torque_command", "velocity|position"),
-                  "the inverter cannot apply the voltage the model allows near the limit (bus sag, modulation "
-                  "limit): the current stops following its command early", False,
-                  {"dead_time": "run at high speed with low current, and at low speed with high current"},
-                  None, None, None))
-    add(Candidate("voltage_limit_mode", ("tracking",), ("current", "current_command|torque_command", "velocity|position"),
-                  "the drive shares the voltage circle between d and q differently from the model (proportional "
-                  "scaling, d or q priority, field weakening): only visible where the voltage demand reaches the "
-                  "circle", True,
-                  {"voltage_saturation": "run at the top speed with the d current recorded: the modes differ in "
-                   "i_d, a lower limit does not"},
-                  None, None, None))
-    add(Candidate("dead_time", ("electrical",), ("voltage_q", "current", "velocity|position"),
-                  "inverter dead time: the applied voltage falls short by a constant times the sign of the current",
-                  True, {"coulomb_friction": "friction acts on torque: compare the voltage equation at standstill "
-                         "with current of both signs"},
-                  v_dead_time, excite_dead_time, params_dead_time, undecided_why=dead_time_in_band))
-    add(Candidate("current_loop_delay", ("electrical",), ("voltage_q", "current", "velocity|position"),
-                  "the recorded voltage leads the current by a delay (PWM / computation delay)", True,
-                  {"inductance_error": "current steps recorded at a higher rate than the current loop"},
-                  v_single("current_loop_delay", {"delay": col_delay}), None, params_delay))
-    add(Candidate("thermal_parameters", ("thermal",), ("current", "winding_temperature|housing_temperature"),
-                  "the thermal network (R_wh, R_ha, C_w, C_h) is off", True,
-                  {"iron_loss": "hold current at standstill (no iron loss) and spin at high speed with no current"},
-                  None, None, None))
-    add(Candidate("iron_loss", ("thermal",), ("current", "velocity|position", "winding_temperature|housing_temperature"),
-                  "iron (core) loss: heat growing with speed, with little current", False,
-                  {"thermal_parameters": "spin at high speed with no current: only iron loss heats then"},
-                  None, None, None))
-    return C
+    """Every candidate effect by its identifier (the names used in the JSON report), in the registry's order:
+    its record (:mod:`..effects.registry`) and its forms (:func:`_forms`)."""
+    forms = _forms()
+    out = {}
+    for e in registry.candidates():
+        variants, excited, to_params, undecided = forms.get(e.name, (None, None, None, None))
+        if isinstance(variants, Single):
+            variants = v_single(e.name, variants.columns)
+        out[e.name] = Candidate(e.name, e.equations, e.needs, e.description, e.simulated, dict(e.confusable),
+                                variants, excited, to_params, hides_behind=e.hides_behind, undecided_why=undecided,
+                                record=e)
+    return out
 
 
-EFFECT_NAMES = tuple(library())
-THERMAL = ("thermal_parameters", "iron_loss")
+EFFECT_NAMES = registry.names(registry.candidates())
+#: found by the thermal network's output error, not the linear selection
+THERMAL = registry.names(registry.by_route(Route.THERMAL))
 #: checked by output-error routines and the simulation, not the linear selection
-SPECIAL = THERMAL + ("voltage_saturation", "voltage_limit_mode")
+SPECIAL = registry.names(registry.where(lambda e: e.special and e.candidate))
 
 
 # ------------------------------------------------------------------------------------------ evidence
@@ -1344,39 +1276,37 @@ def evidence(effect: str, variant: Variant, loc: dict, extra: dict) -> list[str]
     numbers. ``extra``: ``explained`` (share of the nominal residual variance its columns explain),
     ``dbic``, ``heldout``."""
     out: list[str] = []
-    if effect in ("coulomb_friction", "asymmetric_friction", "stribeck_friction", "viscous_friction"):
+    record = registry.get(effect) if registry.known(effect) else None
+    story = record.story if record is not None else Story.NONE
+    if story is Story.VELOCITY:
         s = _velocity_story(loc)
         if s:
             out.append(s)
-    elif effect in ("cogging_torque", "electrical_angle_ripple"):
+    elif story is Story.ANGLE_SPECTRUM:
         s = _spectrum_story(loc, int(variant.hyper["order"]))
         if s:
             out.append(s)
-    elif effect in ("torque_constant_error", "magnetic_saturation"):
+    elif story is Story.CURRENT_TREND:
         for eq in ("mechanical", "electrical"):
             s = _trend_story(loc, eq, "current", "|current|")
             if s:
                 out.append(s)
-    elif effect in ("resistance_temperature", "magnet_temperature"):
+    elif story is Story.TEMPERATURE_TREND:
         for eq in ("electrical", "mechanical"):
             s = _trend_story(loc, eq, "temperature", "temperature")
             if s:
                 out.append(s)
-    elif effect == "voltage_saturation":
+    elif story is Story.HEADROOM:
         s = _trend_story(loc, "electrical", "headroom", "voltage headroom |v|/v_max")
         if s:
             out.append(s)
-    elif effect in ("dead_time", "resistance_error", "inductance_error", "current_loop_delay"):
+    elif story is Story.ELECTRICAL_CURRENT_TREND:
         s = _trend_story(loc, "electrical", "current", "|current|")
-        if s:
-            out.append(s)
-    elif effect == "position_dependent_load":
-        s = _velocity_story(loc)
         if s:
             out.append(s)
     for eq in ("mechanical", "electrical"):
         wins = (loc.get(eq) or {}).get("windows") or []
-        if wins and effect in ("resistance_temperature", "magnet_temperature", "thermal_parameters", "iron_loss"):
+        if wins and record is not None and record.level_windows:
             w = max(wins, key=lambda x: x["ratio_to_quietest"])
             out.append(f"{eq} residual changes level at t = {w['start']:.1f}-{w['stop']:.1f} s "
                        f"({w['ratio_to_quietest']:.1f}x the quietest segment)")

@@ -27,6 +27,7 @@ import numpy as np
 from scipy import stats
 
 from .candidates import THERMAL, Candidate, Variant, implausible
+from ..effects import registry
 from .equation_error import Context, Fit, delta_bic, fit_columns, heldout_comparison, robust_std, touched
 
 
@@ -249,7 +250,7 @@ def checkable(ctx: Context, cand: Candidate, loc: dict) -> tuple[list[Variant] |
                       "needs": list(cand.needs)}
     if any(len(ctx.blocks[eq].valid) and ctx.blocks[eq].valid.sum() < 20 for eq in cand.equations if eq in ctx.blocks):
         return None, {"effect": cand.name, "reason": "too few valid samples", "needs": []}
-    if ctx.nuisance and cand.name in ("inductance_error", "current_loop_delay"):
+    if ctx.nuisance and registry.get(cand.name).within_loop_period:
         # what happens within a current-loop period cannot be seen between samples: say so, never fit the
         # sampling artefact (issue #7, symptom 1: a 1.9 ms "loop delay" from a 100 Hz log)
         return None, {"effect": cand.name, "reason": f"not checkable at {ctx.fs:.4g} Hz: {ctx.nuisance_reason}; "
@@ -305,9 +306,7 @@ def _pool(ctx: Context, loc: dict, lib: dict[str, Candidate], names: list[str]):
     for name in names:
         variants, nc = checkable(ctx, lib[name], loc)
         if nc and nc.get("rejected"):
-            why = ("no multiple of 2 x pole_pairs stands out of the residual's angle-order spectrum (cogging "
-                   "order = lcm(slots, 2p); give effects.cogging_order to test a known order)"
-                   if name == "cogging_torque" else nc["reason"])
+            why = registry.get(name).no_form_reason or nc["reason"]
             early_rejected.append({"effect": name, "form": "", "reason": why})
         elif nc:
             not_checkable.append(nc)

@@ -11,6 +11,7 @@ import numpy as np
 from ... import effects
 from ...params import SPECS, ActuatorParams
 from .candidates import Candidate
+from ..effects import Route, registry
 from .equation_error import Context, thermal_response
 from ..significance import THERMAL_FIT_BOUND_LOG
 from .writeback import within_limits
@@ -114,7 +115,7 @@ def thermal_select(ctx: Context, names: list[str], lib: dict[str, Candidate], ga
         for name in names:
             if any(f["effect"] == name for f in out["findings"]):
                 continue
-            if name == "thermal_parameters":
+            if not registry.get(name).motion_heat:      # the network itself (else a heat source driven by motion)
                 def f(x):
                     r, _, _ = _thermal_resid(ctx, params_with(x), heat(state["k"]) if state["k"].any() else None, every)
                     r = r[~ho]
@@ -161,7 +162,7 @@ def thermal_select(ctx: Context, names: list[str], lib: dict[str, Candidate], ga
         s2 = best["rss"] / max(1, len(sol.fun) - J.shape[1])
         cov = np.linalg.pinv(J.T @ J) * s2
         sd = np.sqrt(np.clip(np.diag(cov), 0, None))
-        if best["name"] == "thermal_parameters":
+        if not registry.get(best["name"]).motion_heat:
             state["x"] = sol.x
             th = p0.thermal
             pars = {f: getattr(th, f) * math.exp(v) for f, v in zip(_THERMAL_FIELDS, sol.x)}
@@ -197,10 +198,10 @@ def apply_thermal(params: ActuatorParams, thermal: dict[str, Any]):
     for f in thermal["findings"]:
         if f.get("updated_fields"):          # categorical settings (drive.voltage_limit_mode), written as found
             flat.update(f["updated_fields"])
-        elif f["effect"] in ("thermal_parameters", "voltage_saturation", "iron_loss") and f.get("simulated"):
+        elif registry.get(f["effect"]).route in (Route.THERMAL, Route.VOLTAGE_LIMIT) and f.get("simulated"):
             for name, fld in f["fields"].items():
                 flat[fld] = within_limits(SPECS[fld], f["parameters"][name], notes, fld)
-            if f["effect"] == "iron_loss":
+            if registry.get(f["effect"]).motion_heat:
                 # the nominal friction and damping already hold the total drag a test measured: the iron terms
                 # take their share of it (and heat the stator), the rest stays friction
                 b = params.motor.viscous_damping - flat["effects.iron_loss_eddy"]

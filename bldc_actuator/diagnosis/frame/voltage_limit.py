@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from .candidates import Candidate
+from ..effects import Route, registry
 from .equation_error import Context
 from .simulate import commands
 
@@ -42,7 +43,7 @@ def voltage_saturation_check(ctx: Context, lib: dict[str, Candidate], gate, want
     out: dict[str, Any] = {"findings": [], "rejected": [], "not_checkable": []}
     if not wanted:
         return out
-    cand = lib["voltage_saturation"]
+    cand = lib[registry.one(lambda e: e.route is Route.VOLTAGE_LIMIT).name]
     miss = [x for x in ("current", "current_command|torque_command", "velocity|position")
             if not any(y in ctx.have for y in x.split("|"))]
     if miss:

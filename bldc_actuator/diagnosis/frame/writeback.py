@@ -15,6 +15,7 @@ import numpy as np
 from ... import frames
 from ...params import SPECS, from_flat, keep_controller_of, outside_usual_range
 from .candidates import Candidate
+from ..effects import WriteBack, registry
 from .equation_error import Context, Fit
 from .selection import SelectionResult, fit_model
 
@@ -158,12 +159,13 @@ def _rescale_by_torque_constant(pars: dict[str, dict], lib: dict[str, Candidate]
     torque-constant finding κ = K_true / K the model's torque is κ K i, so every torque-side parameter fitted
     alongside (friction, damping, cogging, loads, inertia change) is κ times its current-unit coefficient;
     without this the updated parameters simulate friction 1/κ too small (issue #7, symptom 2)."""
-    kt = pars.get("torque_constant_error", {}).get("ratio_to_nominal", {})
+    scale = registry.torque_scale().name
+    kt = pars.get(scale, {}).get("ratio_to_nominal", {})
     kappa = kt.get("value")
     if not isinstance(kappa, (int, float)) or not math.isfinite(kappa) or kappa <= 0:
         return
     for effect, ps in pars.items():
-        if effect == "torque_constant_error" or "mechanical" not in lib[effect].equations:
+        if effect == scale or "mechanical" not in lib[effect].equations:
             continue
         for name, info in ps.items():
             if info.get("unit") not in _TORQUE_UNITS or not isinstance(info.get("value"), (int, float)):
@@ -234,18 +236,20 @@ def updated_params(ctx: Context, sel: SelectionResult, pars: dict[str, dict], li
     notes: list[str] = []
     not_sim: list[str] = []
     accepted = [a.effect for a in sel.accepted]
+    cogging_written = any(registry.get(e).writeback is WriteBack.COGGING_SERIES for e in accepted)
     for a in sel.accepted:
         cand = lib[a.effect]
+        eff = registry.get(a.effect)
         p = pars[a.effect]
         kind = a.variant.hyper.get("kind")
-        if a.effect == "electrical_angle_ripple" and kind == "offset":
+        if eff.writeback is WriteBack.CURRENT_SENSORS and kind == "offset":
             o_a, o_b = sensor_offsets_for_q_ripple(p["_offset_cos"]["value"], p["_offset_sin"]["value"])
             flat["drive.current_sensor_offset_a"] = flat["drive.current_sensor_offset_a"] + o_a
             flat["drive.current_sensor_offset_b"] = flat["drive.current_sensor_offset_b"] + o_b
             notes.append(f"electrical_angle_ripple (current-sensor offsets) written as drive.current_sensor_offset_a/_b "
                          f"+= {o_a:.4g} / {o_b:.4g} A: the simulated controller acts on the offset measurement")
             continue
-        if a.effect == "electrical_angle_ripple" and kind == "gain":
+        if eff.writeback is WriteBack.CURRENT_SENSORS and kind == "gain":
             d_a, d_b, share = sensor_gains_for_q_ripple(p["_gain_cos"]["value"], p["_gain_sin"]["value"])
             flat["drive.current_sensor_gain_a"] = flat["drive.current_sensor_gain_a"] + d_a
             flat["drive.current_sensor_gain_b"] = flat["drive.current_sensor_gain_b"] + d_b
@@ -254,8 +258,8 @@ def updated_params(ctx: Context, sel: SelectionResult, pars: dict[str, dict], li
                          f"scale of both is a torque-constant error): the simulated controller acts on the "
                          f"mis-scaled measurement; a gain mismatch explains {100 * share:.0f} % of the fitted ripple")
             continue
-        if a.effect == "electrical_angle_ripple":
-            if a.variant.hyper.get("kind") == "torque" and "cogging_torque" not in accepted \
+        if eff.writeback is WriteBack.CURRENT_SENSORS:
+            if a.variant.hyper.get("kind") == "torque" and not cogging_written \
                     and not ctx.params.effects.cogging_order:
                 o = a.variant.hyper["order"]
                 flat["effects.cogging_order"] = o
@@ -269,7 +273,7 @@ def updated_params(ctx: Context, sel: SelectionResult, pars: dict[str, dict], li
         if not cand.simulated:
             not_sim.append(a.effect)
             continue
-        if a.effect == "cogging_torque":
+        if eff.writeback is WriteBack.COGGING_SERIES:
             o = a.variant.hyper["order"]
             nh = a.variant.hyper["harmonics"]
             e = ctx.params.effects
@@ -284,12 +288,10 @@ def updated_params(ctx: Context, sel: SelectionResult, pars: dict[str, dict], li
             flat["effects.cogging_cos"] = tuple(cc)
             flat["effects.cogging_sin"] = tuple(ss)
             continue
-        if a.effect == "dead_time" and ctx.dead_time_sign:
+        if eff.replay_form and ctx.dead_time_sign:
             flat["drive.dead_time_sign"] = ctx.dead_time_sign     # the converter form the replay identified
-        if a.effect == "resistance_temperature":
-            flat["motor.resistance_temperature_enabled"] = True
-        if a.effect == "magnet_temperature":
-            flat["motor.magnet_temperature_enabled"] = True
+        for flag in eff.enables:
+            flat[flag] = True
         for name, info in p.items():
             fld = info.get("field")
             if not fld or fld not in SPECS:
@@ -301,11 +303,14 @@ def updated_params(ctx: Context, sel: SelectionResult, pars: dict[str, dict], li
             if spec.type in (int, float):
                 v = within_limits(spec, v, notes, fld)
             flat[fld] = v
-    if "transmission_compliance" in accepted and flat.get("gear.transmission_stiffness", 0.0) > 0.0:
+    for e in dict.fromkeys(accepted):
+        gives = registry.get(e).takes_from_rotor_inertia
+        if gives is None or not flat.get("gear.transmission_stiffness", 0.0) > 0.0:
+            continue
         # the rigid model's rotor inertia held the load: the rotor side keeps the rest (after any inertia finding)
-        j_ref = pars["transmission_compliance"]["load_inertia_reflected"]["value"]
+        j_ref = pars[e][gives]["value"]
         flat["motor.rotor_inertia"] = flat["motor.rotor_inertia"] - j_ref
-        notes.append(f"transmission_compliance: motor.rotor_inertia -= {j_ref:.4g} kg*m^2 (the load, now "
+        notes.append(f"{e}: motor.rotor_inertia -= {j_ref:.4g} kg*m^2 (the load, now "
                      f"gear.load_inertia behind the spring)")
     try:
         newp = from_flat(flat)

@@ -24,6 +24,7 @@ import numpy as np
 
 from ...kernel import VOLTAGE_LIMIT_MODES
 from ...params import ActuatorParams, current_loop_limit
+from ..effects import Route, registry
 from ..frame import simulate
 
 #: a sample counts as "at the voltage limit" when the model's steady voltage demand |(R i + K ω) + j p ω L i|
@@ -100,7 +101,9 @@ def identify(ctx, params: ActuatorParams, window_s: float, *, wanted: bool = Tru
              tolerance: float = 0.05) -> dict[str, Any]:
     """``{"findings": [...], "rejected": [...], "not_checkable": [...], "simulation": {...} | None}`` for the
     effect ``voltage_limit_mode``; ``params`` = the model so far (every other accepted finding applied)."""
-    name = "voltage_limit_mode"
+    eff = registry.one(lambda e: e.route is Route.DRIVE_MODE)
+    name = eff.name
+    par = eff.params[0]         # the one categorical setting it writes
     out: dict[str, Any] = {"findings": [], "rejected": [], "not_checkable": [], "simulation": None}
     if not wanted:
         return out
@@ -161,8 +164,8 @@ def identify(ctx, params: ActuatorParams, window_s: float, *, wanted: bool = Tru
                        f"({best}, not {nominal})",
         "form": f"{best} instead of {nominal}",
         "mode": best,
-        "parameters": {"voltage_limit_mode": best}, "uncertainty": {"voltage_limit_mode": None},
-        "units": {"voltage_limit_mode": ""}, "fields": {"voltage_limit_mode": "drive.voltage_limit_mode"},
+        "parameters": {par.name: best}, "uncertainty": {par.name: None},
+        "units": {par.name: par.unit}, "fields": {par.name: par.field},
         "simulated": True,
         "evidence": [f"{len(tr)} training windows at the voltage limit simulated under every mode: relative error "
                      + ", ".join(f"{m} {v:.3f}" for m, v in scores.items()), reason],

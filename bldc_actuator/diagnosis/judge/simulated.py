@@ -33,18 +33,17 @@ from ..frame import simulate
 from ..frame import thermal as thermal_net
 
 from ..frame import writeback
+from ..effects import Route, registry
 
 #: the simulated channel in which each equation's effects show (voltage-side effects: the drive's q voltage,
 #: since the current loop hides them in the current; current when no voltage was recorded)
 _CHANNEL = {"mechanical": "velocity", "electrical": "voltage", "tracking": "current"}
 
 
-#: torque-side in the equations but drive-side in fact: the current sensors' offsets and gains (the drive acts on
-#: what they report), judged by the closed-loop replay where the drive check passes
-_SENSOR_SIDE = ("electrical_angle_ripple",)
-
-#: effects the replay cannot show when a torque sensor is recorded (its reading is the replay's load)
-_LOAD_EFFECTS = ("position_dependent_load",)
+# torque-side in the equations but drive-side in fact (the current sensors' offsets and gains: the drive acts on
+# what they report) is the facet ``Effect.sensor_side``, judged by the closed-loop replay where the drive check
+# passes; ``Effect.external_load``: the replay cannot show it when a torque sensor is recorded (its reading is the
+# replay's load)
 
 
 def _speed_scale(ctx, starts: list[int], window_s: float) -> float:
@@ -70,7 +69,7 @@ def simulate_findings(ctx, sel, pars, lib, starts: list[int], window_s: float, z
         return {}
     full, _, _ = writeback.updated_params(ctx, sel, pars, lib)
     effects = [a.effect for a in sel.accepted]
-    if "dead_time" in effects and full.drive.dead_time > 0.0:
+    if any(registry.get(e).replay_form for e in effects) and full.drive.dead_time > 0.0:
         form = dead_time_form(ctx, full, window_s)
         if form is not None and form["chosen"] != full.drive.dead_time_sign:
             ctx.dead_time_sign = form["chosen"]
@@ -122,7 +121,7 @@ def simulate_findings(ctx, sel, pars, lib, starts: list[int], window_s: float, z
                       "without": float(np.mean(r["per_window"][ch])), "with": float(np.mean(w_full[ch])),
                       "noise_floor": float("nan")}
             continue
-        if "torque" in ctx.have and e in _LOAD_EFFECTS:
+        if "torque" in ctx.have and registry.get(e).external_load:
             out[e] = {"channel": ch, "verdict": "not checkable in simulation",
                       "reason": "the torque sensor supplies the load in the replay, so a load term cannot show there",
                       "without": float(np.mean(r["per_window"][ch])), "with": float(np.mean(w_full[ch])),
@@ -132,7 +131,7 @@ def simulate_findings(ctx, sel, pars, lib, starts: list[int], window_s: float, z
         closed = _verdict(r["per_window"], w_full, ch, other, z, tolerance, len(starts), window_s,
                           None if imposed else signal)
         closed["replay"] = REPLAY_CLOSED_LOOP
-        if ch == "velocity" and res_cd is not None and e in _SENSOR_SIDE:
+        if ch == "velocity" and res_cd is not None and registry.get(e).sensor_side:
             # the drive's current sensors: the drive itself is in question, the closed loop judges (as before
             # issue #14's third-party set), the measured-current replay only where the drive check fails
             if check["ok"]:
@@ -449,7 +448,7 @@ def judge_thermal(ctx, linear_params, thermal: dict[str, Any]) -> dict[str, dict
     without it (leave one out, every other finding and the linear ones applied). ``confirmed`` when it gains
     more than :data:`THERMAL_MIN_GAIN` and :data:`THERMAL_MIN_KELVIN`; ``worsens the simulated temperature``
     when it loses that much."""
-    found = [f for f in thermal.get("findings", []) if f.get("simulated") and f["effect"] in ("thermal_parameters", "iron_loss")]
+    found = [f for f in thermal.get("findings", []) if f.get("simulated") and registry.get(f["effect"]).route is Route.THERMAL]
     if not found:
         return {}
     full, _, _ = thermal_net.apply_thermal(linear_params, thermal)
@@ -458,7 +457,7 @@ def judge_thermal(ctx, linear_params, thermal: dict[str, Any]) -> dict[str, dict
     for f in found:
         sub = dict(thermal, findings=[g for g in thermal["findings"] if g is not f])
         without, _, _ = thermal_net.apply_thermal(linear_params, sub)
-        e_without = _thermal_holdout(ctx, without, None if f["effect"] == "iron_loss" else thermal.get("extra_heat"))
+        e_without = _thermal_holdout(ctx, without, None if registry.get(f["effect"]).motion_heat else thermal.get("extra_heat"))
         gain = e_without - e_with
         floor = max(THERMAL_MIN_KELVIN, THERMAL_MIN_GAIN * e_without) if math.isfinite(e_without) else float("nan")
         if not (math.isfinite(gain) and math.isfinite(floor)):

@@ -22,6 +22,7 @@ from ..frame import thermal as thermal_net
 from ..frame import writeback
 from . import drive_modes
 from . import simulated as judge
+from ..effects import Route, registry
 from ..frame.candidates import SPECIAL
 from ..frame.selection import forward_select, name_unexcited, unexcited_aliases
 from ..records import Judgement, Say, Search
@@ -181,13 +182,14 @@ def _simulated_verdicts(s: Search, sel, ff, pars: dict, special: dict, verdicts:
         special["findings"] = [f for f in special["findings"] if f["effect"] not in refused]
 
     # the drive's fitted voltage limit: held-out windows replayed with it and with the nominal one
-    vs = next((f for f in special["findings"] if f["effect"] == "voltage_saturation"), None)
+    vlim = registry.one(lambda e: e.route is Route.VOLTAGE_LIMIT).name
+    vs = next((f for f in special["findings"] if f["effect"] == vlim), None)
     if vs is not None and options.replay:
         v = judge.judge_voltage_limit(ctx, thermal_net.apply_thermal(params_linear, {"findings": [vs]})[0], vs, starts,
                                       win, tolerance=options.tolerance)
-        sim["voltage_saturation"] = v
+        sim[vlim] = v
         if options.simulation_gate and v["verdict"] not in ("confirmed", "not checkable in simulation"):
-            _refuse(verdicts, "voltage_saturation", v, " A", say)
+            _refuse(verdicts, vlim, v, " A", say)
             special["findings"] = [f for f in special["findings"] if f is not vs]
 
     return _Judged(sel=sel, ff=ff, pars=pars, special=special, verdicts=verdicts, sim=sim,
@@ -282,12 +284,13 @@ def run(s: Search, options, say: Say) -> Judgement:
     # the drive's behaviour at the voltage limit: only the simulation can see it
     if options.replay:
         with_special = thermal_net.apply_thermal(params_linear, special)[0] if special["findings"] else params_linear
-        dm = drive_modes.identify(ctx, with_special, win, wanted="voltage_limit_mode" in s.names, z=2.0,
+        mode = registry.one(lambda e: e.route is Route.DRIVE_MODE).name
+        dm = drive_modes.identify(ctx, with_special, win, wanted=mode in s.names, z=2.0,
                                   tolerance=options.tolerance)
         for k in ("findings", "rejected", "not_checkable"):
             special[k] = special[k] + dm[k]
         if dm["simulation"] is not None:
-            sim["voltage_limit_mode"] = dm["simulation"]
+            sim[mode] = dm["simulation"]
     # the drive's feed-forward: identified before anything was judged, and again with the judged findings
     # (:func:`_drive_second_pass`)
     df = ctx.drive_identified

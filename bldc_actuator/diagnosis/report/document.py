@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from ...params import ActuatorParams, dump_yaml
+from ..effects import registry
 from ..results import NOT_DECIDABLE, NOTHING_MISSING, Verdict, decide
 
 
@@ -422,7 +423,7 @@ def _plot_jobs(r: DiagnosisReport, d: Path) -> list:
     if "mechanical" in ctx.blocks and float(ctx.sig["theta_known"]) > 0:
         order = None
         for f in r.findings:
-            if f["effect"] in ("cogging_torque", "electrical_angle_ripple"):
+            if registry.known(f["effect"]) and registry.get(f["effect"]).angle_locked:
                 import re
 
                 m = re.search(r"order (\d+)", f.get("form", "")) or re.search(r"(\d+)", f.get("form", ""))

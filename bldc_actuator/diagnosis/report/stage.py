@@ -11,6 +11,7 @@ import time
 import numpy as np
 
 from ..frame import candidates as cands
+from ..effects import Route, registry
 from . import decidability, residual_structure
 from ..frame import locate as loc_mod
 from ..frame import simulate
@@ -87,7 +88,7 @@ def _finding(ctx, sel, ff, pars, lib, located, not_sim, a) -> dict:
         rows = B.rows(ho, "holdout")
         metrics.append({"metric": f"{eq} equation-error residual RMS (held-out)", "unit": B.unit,
                         "before": rms(f_without.resid[eq][rows]), "after": rms(sel.final_fit.resid[eq][rows])})
-    if a.effect in ("cogging_torque", "electrical_angle_ripple") and "mechanical" in ctx.blocks:
+    if registry.get(a.effect).angle_locked and "mechanical" in ctx.blocks:
         rows = ctx.blocks["mechanical"].rows(ho, "holdout")
         th = ctx.dsig("theta")[rows]
         o = int(a.variant.hyper["order"])
@@ -114,7 +115,7 @@ def _finding(ctx, sel, ff, pars, lib, located, not_sim, a) -> dict:
         "round": a.round,
         "correlations": [c for c in ff.correlations if c["a"] in a.added or c["b"] in a.added],
     }
-    if a.effect == "torque_constant_error":
+    if registry.get(a.effect).torque_scale:
         finding["frame_factor"] = p.get("frame_factor", {}).get("value", "none")
     nl = ff.nonlinear.get(a.effect, {})
     if nl.get("omega_s_corr_amplitude") is not None and abs(nl["omega_s_corr_amplitude"]) > 0.9:
@@ -152,7 +153,7 @@ def run(signals, params, s: Search, j: Judgement, m: Model, options, say: Say, t
         before, after = simulate.replay(ctx, [params, m.params], s.starts_holdout, options.window_s)
         replay_ho = {"before": before, "after": after, "paired": paired_change(before, after)}
         for f in findings:
-            if f["effect"] in ("thermal_parameters", "iron_loss"):
+            if registry.get(f["effect"]).route is Route.THERMAL:
                 continue
             f["metrics"].append({"metric": f"short-window simulation speed error RMS (held-out, "
                                            f"{options.window_s:g} s windows, all accepted effects)",
@@ -219,8 +220,9 @@ def run(signals, params, s: Search, j: Judgement, m: Model, options, say: Say, t
     say(f"6/6 show: {verdict} ({timing['show']:.2f} s; total {timing['total']:.2f} s)")
     not_checkable = sel.not_checkable + j.special["not_checkable"]
     if any(u.code == "clipped" for u in reasons):
-        not_checkable = [x for x in not_checkable if x["effect"] != "torque_constant_error"] + [
-            {"effect": "torque_constant_error", "reason": next(u.reason for u in reasons if u.code == "clipped"),
+        scale = registry.torque_scale().name
+        not_checkable = [x for x in not_checkable if x["effect"] != scale] + [
+            {"effect": scale, "reason": next(u.reason for u in reasons if u.code == "clipped"),
              "needs": ["current inside the drive's limit"]}]
     rejected = sel.rejected + j.special["rejected"] + [
         {"effect": v.effect, "form": "practical significance", "verdict": v.kind, "reason": v.message}
@@ -258,7 +260,7 @@ def torque_balance(signals, params, res, options, say: Say, t_start: float) -> D
     for x in res.findings:
         ev = [f"torque balance: ΔBIC {x.delta_bic:.1f}; held-out torque RMS {x.held_out['before']:.4g} -> "
               f"{x.held_out['after']:.4g} N*m"]
-        if x.effect == "cogging_torque" and res.spectrum:
+        if registry.get(x.effect).angle_locked and res.spectrum:
             o = res.spectrum
             ev.append(f"angle-order peak at order {o['order']:.3g} ± {o['order_sd']:.2g} per motor revolution "
                       f"({o['amplitude']:.3g} N*m, {o['peak_over_median']:.1f} x the median) over "

@@ -17,6 +17,7 @@ import numpy as np
 
 from ...params import ActuatorParams
 from .. import drive_feedforward
+from ..effects import Route, registry
 from ..frame import candidates as cands
 from ..frame import equation_error as ee
 from ..frame import locate as loc_mod
@@ -193,7 +194,8 @@ def run(signals, params: ActuatorParams, options, say: Say) -> Search | None:
     linear = [n for n in names if n not in cands.SPECIAL]
     sel = forward_select(ctx, located, lib, linear, options.gate, progress=lambda m: say(f"4/6 attribute: {m}"))
     special = thermal_net.thermal_select(ctx, [n for n in names if n in cands.THERMAL], lib, options.gate)
-    vsat = voltage_limit.voltage_saturation_check(ctx, lib, options.gate, "voltage_saturation" in names)
+    vlim = registry.one(lambda e: e.route is Route.VOLTAGE_LIMIT).name
+    vsat = voltage_limit.voltage_saturation_check(ctx, lib, options.gate, vlim in names)
     for k in ("findings", "rejected", "not_checkable"):
         special[k] = special[k] + vsat[k]
     timing["attribute"] = time.perf_counter() - t0

@@ -1,0 +1,7 @@
+"""The diagnosis's effects as plugins (issue #24): one module per effect, each holding ``EFFECT``, an
+:class:`~.record.Effect`; :mod:`.registry` is how the rest of the diagnosis knows them. See docs/effects.md."""
+
+from . import registry
+from .record import Effect, Param, Route, Story, WriteBack
+
+__all__ = ["Effect", "Param", "Route", "Story", "WriteBack", "registry"]

@@ -1,0 +1,124 @@
+"""The typed record of one effect the diagnosis knows (issue #24): every facet the stages ask about, in one place.
+
+Each effect is one module of this package holding ``EFFECT = Effect(...)``; :mod:`.registry` finds them. The
+rest of the diagnosis knows an effect only through these facets (``effect.route is Route.THERMAL``,
+``effect.angle_locked``...), never by comparing its name (``test/test_effect_literals.py``).
+
+This package sits below the diagnosis's frame and stages: it imports nothing of the diagnosis, so every layer
+may import it (``test/test_import_graph.py``).
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Mapping
+
+
+class Route(enum.Enum):
+    """Which search finds the effect."""
+
+    LINEAR = "linear"                #: equation-error columns, forward selection (frame.selection)
+    THERMAL = "thermal"              #: the thermal network's output error (frame.thermal)
+    VOLTAGE_LIMIT = "voltage_limit"  #: the drive's fitted voltage limit (frame.voltage_limit, judged by replay)
+    DRIVE_MODE = "drive_mode"        #: the drive's voltage-limit mode, by simulation only (judge.drive_modes)
+    #: the drive's current-controller form and feed-forward, by the closed-loop replay before anything is judged
+    #: (diagnosis.drive_feedforward); found by the pipeline itself, never a candidate a run is asked to test
+    DRIVE_FORM = "drive_form"
+
+
+class Story(enum.Enum):
+    """The report's plain-word pointer from the located residual to the effect (frame.candidates.evidence)."""
+
+    NONE = "none"
+    VELOCITY = "velocity"                      #: the mechanical residual by speed (direction, low vs high speed)
+    ANGLE_SPECTRUM = "angle_spectrum"          #: the mechanical residual's angle-order spectrum at the form's order
+    CURRENT_TREND = "current_trend"            #: both equations' residuals by |current|
+    TEMPERATURE_TREND = "temperature_trend"    #: both equations' residuals by temperature
+    HEADROOM = "headroom"                      #: the electrical residual by voltage headroom |v|/v_max
+    ELECTRICAL_CURRENT_TREND = "electrical_current_trend"  #: the electrical residual by |current|
+
+
+class WriteBack(enum.Enum):
+    """How an accepted finding enters the updated parameter file (frame.writeback, frame.thermal)."""
+
+    FIELDS = "fields"                  #: each fitted parameter into its own field
+    COGGING_SERIES = "cogging_series"  #: angle harmonics added onto the nominal series of the same order
+    CURRENT_SENSORS = "current_sensors"  #: the current sensors' offsets/gains (or a cogging-like torque form)
+    SETTING = "setting"                #: a categorical drive setting, written as found (``updated_fields``)
+    NONE = "none"                      #: no simulator term
+
+
+@dataclass(frozen=True)
+class Param:
+    """One fitted parameter of an effect: its name in the report, SI unit, and the parameter-file field it is
+    written to (None: reported, not written)."""
+
+    name: str
+    unit: str
+    field: str | None = None
+
+
+@dataclass(frozen=True)
+class Effect:
+    """Everything the diagnosis knows about one effect apart from its regressor columns' code (which
+    :mod:`..frame.candidates` attaches to the same name)."""
+
+    name: str                                   #: identifier (the JSON report's ``effect``)
+    rank: int                                   #: catalogue order (the order effects are tried and listed)
+    description: str                            #: plain words: what physics this is
+    equations: tuple[str, ...]                  #: "mechanical" | "electrical" | "tracking" | "thermal"
+    needs: tuple[str, ...]                      #: recorded channels ("a|b" = either)
+    simulated: bool                             #: has a simulator term (parameters in the schema)
+    route: Route = Route.LINEAR
+    #: other effect -> the experiment separating the two
+    confusable: Mapping[str, str] = field(default_factory=dict)
+    #: never fitted on its own; checked as an alias only behind these accepted effects (None: behind any sharing
+    #: an equation)
+    hides_behind: tuple[str, ...] | None = None
+    params: tuple[Param, ...] = ()              #: the fitted parameters it reports (documentation, lookups)
+    #: a parameter-change effect: (reported parameter, dotted path of its nominal value in ActuatorParams); its
+    #: practical significance is the largest relative change among them
+    nominal: tuple[tuple[str, str], ...] = ()
+    #: its output-error fit is bounded to [1/10, 10] x nominal (a parameter at the bound is not identified)
+    bounded_log_fit: bool = False
+    story: Story = Story.NONE
+    #: the report points at the time windows where the residual changes level (slow, temperature-driven effects)
+    level_windows: bool = False
+    #: locked to the rotor angle: an angle-synchronous held-out metric and order plot at its form's order
+    angle_locked: bool = False
+    #: the selection's words when no form of it stands out (in place of "no usable form for this data")
+    no_form_reason: str | None = None
+    #: shows only within a current-loop period: not checkable from a log slower than the loop (sampling artefact)
+    within_loop_period: bool = False
+    #: torque-side in the equations, drive-side in fact (the current sensors): the closed-loop replay judges it
+    sensor_side: bool = False
+    #: an external load: a recorded torque sensor supplies it in the replay, which therefore cannot show it
+    external_load: bool = False
+    writeback: WriteBack = WriteBack.FIELDS
+    #: parameter-file flags switched on when it is written back
+    enables: tuple[str, ...] = ()
+    #: its ratio (``ratio_to_nominal``) scales every torque-side parameter fitted with it (the torque constant);
+    #: not checkable where the current clips
+    torque_scale: bool = False
+    #: a heat source driven by motion: extra heat in the thermal model, its drag a share of the nominal friction
+    motion_heat: bool = False
+    #: the replay chooses between the simulator's forms of its term (the converter's sign form, drive.dead_time_sign)
+    replay_form: bool = False
+    #: its parameter that the rotor inertia gives up when written back (the load moved behind a spring)
+    takes_from_rotor_inertia: str | None = None
+
+    def __post_init__(self):
+        object.__setattr__(self, "confusable", MappingProxyType(dict(self.confusable)))
+
+    @property
+    def candidate(self) -> bool:
+        """One of the candidate effects a run tests (``--effects``, frame.candidates.library); the drive's own form
+        is identified by the pipeline in every run instead."""
+        return self.route is not Route.DRIVE_FORM
+
+    @property
+    def special(self) -> bool:
+        """Found by its own route (thermal, voltage limit, drive mode), not by the linear selection."""
+        return self.route is not Route.LINEAR
