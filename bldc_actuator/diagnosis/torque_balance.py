@@ -36,7 +36,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..effects import cogging_torque
+from .effects import Route, WriteBack, registry
 from .signals import Signals
+
+#: the finding of an angle-locked ripple in the measured torque (this route's own effect)
+RIPPLE_EFFECT = registry.one(lambda e: e.route is Route.TORQUE_BALANCE).name
+#: the cogging finding (an angle series written onto the nominal one), which the ripple does not repeat
+COGGING_EFFECT = registry.one(lambda e: e.writeback is WriteBack.COGGING_SERIES).name
 
 BIC_GATE = 10.0
 
@@ -85,7 +91,7 @@ class TorqueBalanceResult:
         return {"method": "torque balance (no motor current)", "angle_source": self.angle_source,
                 "r2": self.r2, "held_out": self.held_out, "findings": [t(x) for x in self.findings],
                 "rejected": [t(x) for x in self.rejected], "not_checkable": self.not_checkable,
-                "order_spectrum": self.spectrum, "angle_locked_ripple": self.ripple, "notes": self.notes}
+                "order_spectrum": self.spectrum, RIPPLE_EFFECT: self.ripple, "notes": self.notes}
 
 
 # ----------------------------------------------------------------------------------------- signals
@@ -583,7 +589,7 @@ def _ripple_finding(rip, cols, keys, fit, heldout, n, th, out_f, out_r, notes) -
         notes.append(txt.replace("angle-locked ripple in the measured torque", "no angle-locked ripple in the "
                                  "measured torque: the strongest order") + ": not reported")
         return
-    cog = [f for f in out_f if f.effect == "cogging_torque"
+    cog = [f for f in out_f if f.effect == COGGING_EFFECT
            and abs(f.parameters.get("cogging_order", -1) - k) <= 3 * rip["order_sd"] + 0.5]
     if cog:
         notes.append(txt + ": attributed to the motor's cogging by the torque balance")
@@ -600,7 +606,7 @@ def _ripple_finding(rip, cols, keys, fit, heldout, n, th, out_f, out_r, notes) -
     un = {"order": "per motor revolution", "amplitude": "N*m", "cos": "N*m", "sin": "N*m"}
     notes.append(txt + ": reported as a finding of the measured torque (cogging or torque ripple; without the "
                        "motor current the motor's own share is not separated)")
-    out_f.append(Term("angle_locked_ripple", par, unc, un, ho, float(dbic), True,
+    out_f.append(Term(RIPPLE_EFFECT, par, unc, un, ho, float(dbic), True,
                       "angle-locked in the measured torque (decidable without the motor current)"))
 
 

@@ -695,7 +695,7 @@ def report(signals, params, res: VoltageModeResult, options, say, t_start: float
     return DiagnosisReport(
         channels=sorted(c for c, v in signals.channels.items() if np.isfinite(v).any()), findings=findings,
         rejected=rejected, windows=[], data_issues=issues, not_checkable=[], aliases=[],
-        verdict=rec.text(), verdict_record=rec, notes=notes, compare=compare,
+        verdict_record=rec, notes=notes, compare=compare,
         updated_params=updated_params(params, res), nominal_params=params, timing=timing,
         method="voltage mode (no current sensor)",
         setup={"rate_hz": (getattr(signals, "meta", {}) or {}).get("rate_hz"), "samples": int(len(signals.time)),

@@ -380,7 +380,7 @@ def _thermal_support(before: float, after: float, value: float, sd: float, param
         return False, (f"not supported: held-out temperature RMS {before:.3g} -> {after:.3g} K ({-100 * gain:+.2f} %), "
                        f"not better by more than {100 * opts.gate.min_heldout_gain:g} %")
     field = TRACKED["housing_to_ambient_resistance"][2].split(".", 1)[1]
-    verdicts = significance.judge({"thermal_parameters": {field: {"value": value, "sd": sd, "field": field}}},
+    verdicts = significance.judge({TRACKED["housing_to_ambient_resistance"][0]: {field: {"value": value, "sd": sd, "field": field}}},
                                   params, tolerance=opts.tolerance,
                                   max_relative_uncertainty=opts.max_relative_uncertainty)
     if verdicts:

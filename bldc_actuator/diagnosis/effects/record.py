@@ -26,6 +26,9 @@ class Route(enum.Enum):
     #: the drive's current-controller form and feed-forward, by the closed-loop replay before anything is judged
     #: (diagnosis.drive_feedforward); found by the pipeline itself, never a candidate a run is asked to test
     DRIVE_FORM = "drive_form"
+    #: found by the torque-balance route (a measured torque and motion, no motor current: diagnosis.torque_balance)
+    #: from the torque alone, never a candidate of the full route
+    TORQUE_BALANCE = "torque_balance"
 
 
 class Story(enum.Enum):
@@ -68,7 +71,7 @@ class Effect:
     name: str                                   #: identifier (the JSON report's ``effect``)
     rank: int                                   #: catalogue order (the order effects are tried and listed)
     description: str                            #: plain words: what physics this is
-    equations: tuple[str, ...]                  #: "mechanical" | "electrical" | "tracking" | "thermal"
+    equations: tuple[str, ...]                  #: "mechanical" | "electrical" | "tracking" | "thermal" | "torque_balance"
     needs: tuple[str, ...]                      #: recorded channels ("a|b" = either)
     simulated: bool                             #: has a simulator term (parameters in the schema)
     route: Route = Route.LINEAR
@@ -115,8 +118,8 @@ class Effect:
     @property
     def candidate(self) -> bool:
         """One of the candidate effects a run tests (``--effects``, frame.candidates.library); the drive's own form
-        is identified by the pipeline in every run instead."""
-        return self.route is not Route.DRIVE_FORM
+        is identified by the pipeline in every run instead, a torque-balance finding by that route."""
+        return self.route not in (Route.DRIVE_FORM, Route.TORQUE_BALANCE)
 
     @property
     def special(self) -> bool:

@@ -265,7 +265,7 @@ def torque_balance(signals, params, res, options, say: Say, t_start: float) -> D
             ev.append(f"angle-order peak at order {o['order']:.3g} ± {o['order_sd']:.2g} per motor revolution "
                       f"({o['amplitude']:.3g} N*m, {o['peak_over_median']:.1f} x the median) over "
                       f"{o['revolutions']:.2f} revolution(s)")
-        if x.effect == "angle_locked_ripple" and res.ripple:
+        if registry.get(x.effect).route is Route.TORQUE_BALANCE and res.ripple:
             o = res.ripple
             ev.append(f"angle-locked ripple in the measured torque at order {o['order']:.3g} ± {o['order_sd']:.2g} per "
                       f"motor revolution: {o['amplitude']:.3g} ± {o['amplitude_sd']:.2g} N*m at the output, "
