@@ -225,13 +225,15 @@ def main() -> int:
     fit = [s for s in samples if s[0] >= args.warmup]
     b, se = slope([s[0] for s in fit], [s[1] for s in fit])
     fb, _ = slope([s[0] for s in fit], [s[2] for s in fit])
+    bp, _ = slope([s[3] * period_ns * 1e-9 for s in fit], [s[1] for s in fit])   # per simulated second
     rate = sched.periods / wall
     print(f"soak_recording: {wall:.0f} s wall, {sched.periods} periods: {rate:.1f} periods per wall second "
           f"({rate / 1e3 * 100:.2f} % of 1 kHz), {sched.slips} scheduler slips, {late_wakes} loop re-bases")
     print(f"  RSS {samples[0][1] / 1e6:.2f} MB at start, {fit[0][1] / 1e6:.2f} MB after warm-up, "
-          f"{samples[-1][1] / 1e6:.2f} MB at end; max RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e3:.2f} MB")
+          f"{samples[-1][1] / 1e6:.2f} MB at end; max RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 / 1e6:.2f} MB")
     print(f"  RSS slope after {args.warmup:g} s warm-up: {b / 1e3:+.3f} kB/s (standard error {se / 1e3:.3f} kB/s, "
-          f"{len(fit)} samples) = {b * 3600 / 1e6:+.2f} MB per hour")
+          f"{len(fit)} samples) = {b * 3600 / 1e6:+.2f} MB per hour; per simulated second {bp / 1e3:+.3f} kB "
+          f"(the slope at 1 kHz held)")
     print(f"  file: {size / 1e6:.1f} MB written ({fb / 1e6:.3f} MB/s), {rec.messages_written} messages; "
           f"RSS growth per MB written {b / fb * 1e3 if fb else float('nan'):+.2f} kB/MB")
     print(f"  load average at end {' '.join(uptime1)}")
