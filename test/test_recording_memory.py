@@ -160,3 +160,30 @@ def test_no_side_file_is_left_beside_the_recording(tmp_path):
     _write_periods(rec, topics, 0, 300)
     rec.close()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["clean.mcap"]
+
+
+def test_a_full_disk_under_the_side_index_stops_the_recording_cleanly(tmp_path, monkeypatch):
+    """The side file shares the recording's disk: when writing the index there fails (ENOSPC) the recording
+    stops as for any write error (RecordingWriteError, file cut at a chunk boundary, readable)."""
+    import errno
+
+    from bldc_actuator.recording import RecordingWriteError, read_recording
+    from bldc_actuator.recording import mcap_stream
+
+    path = tmp_path / "full.mcap"
+    rec, topics = _recorder(path)
+    _write_periods(rec, topics, 0, 100)
+
+    def full(self):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(mcap_stream.McapStreamWriter, "_spill", full)
+    with pytest.raises(RecordingWriteError) as info:
+        _write_periods(rec, topics, 100, 1000)
+    assert info.value.errno == errno.ENOSPC and rec.closed
+    got = read_raw(path, keep_messages=False)
+    assert not got.finalized
+    n = sum(s[0] for s in got.stats.values())
+    assert 100 * CHANNELS <= n < 1100 * CHANNELS
+    assert read_recording(path).issues   # says it is not finalized
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["full.mcap"]
