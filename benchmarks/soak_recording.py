@@ -20,7 +20,7 @@ the scheduler's slips (wake-ups that found more than a batch due and dropped the
 (bytes, chunks, messages) and the load average at start and end. ``--tracemalloc N``: also take a tracemalloc
 snapshot every N samples and print the biggest growths between the first and the last snapshot (by allocation
 site): how the recorder's memory was traced to its source (tracemalloc slows the loop: figures for rate/slips
-are then not representative).
+are then not representative, and the RSS includes tracemalloc's own tables).
 """
 
 from __future__ import annotations
@@ -179,7 +179,7 @@ def main() -> int:
     if args.tracemalloc:
         import tracemalloc
 
-        tracemalloc.start(8)
+        tracemalloc.start(1)
 
     uptime0 = open("/proc/loadavg").read().split()[:3]
     print(f"soak_recording: {args.joints} joints (ak80_9), 1 kHz against the wall clock, recording every "
@@ -204,7 +204,7 @@ def main() -> int:
                 print(f"  t={s[0]:7.1f} s  rss={s[1] / 1e6:8.2f} MB  file={s[2] / 1e6:9.2f} MB  "
                       f"periods={s[3]}  slips={s[4]}", flush=True)
             if args.tracemalloc and (len(samples) - 1) % args.tracemalloc == 0 and s[0] >= args.warmup:
-                snaps.append((s[0], tracemalloc.take_snapshot()))
+                snaps[1 if snaps else 0:] = [(s[0], tracemalloc.take_snapshot())]   # the first and the latest
             next_sample += int(args.sample * 1e9)
             if now >= end:
                 break
