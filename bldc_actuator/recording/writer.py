@@ -46,6 +46,14 @@ flush_interval=1.0)``
 No ``rosbag2`` metadata record is written (rosbag2 then reads topics, counts and times from the MCAP
 Statistics record, which this writer always emits); run data lives under our own record name.
 
+Memory
+------
+Flat over any duration: the file is written by :class:`~bldc_actuator.recording.mcap_stream.McapStreamWriter`
+(the same records as ``mcap.writer.Writer``), which keeps the summary's chunk index in an anonymous temporary
+file beside the recording instead of one Python object per chunk (``mcap.writer.Writer`` retains ~45 B per
+channel per chunk until ``finish()``: ~40-80 MB per hour for a 12-joint node). What stays in memory is the open
+chunk, the schemas and channels, per-channel counts and one entry per metadata record.
+
 Crash safety
 ------------
 Messages are grouped in chunks. The file is written WITHOUT user-space buffering: when a chunk is
@@ -97,6 +105,7 @@ from typing import Any, Callable, Iterable, Mapping
 from .base import (DEFAULT_CHUNK_SIZE, DEFAULT_FLUSH_INTERVAL, LIBRARY, MESSAGE_ENCODING, METADATA_NAME,
                    PARAMETERS_KEY, PROFILE, RESERVED_METADATA_KEYS, SCHEMA_ENCODING, RecorderClosedError,
                    RecordingWriteError)
+from .mcap_stream import McapStreamWriter
 from .parameters import render_parameters
 from .typesys import message_definition, qos_yaml, type_hash, type_name
 
@@ -177,12 +186,9 @@ class McapRecorder:
     def __init__(self, path, *, parameters: Any = None, metadata: Mapping[str, str] | None = None,
                  chunk_size: int = DEFAULT_CHUNK_SIZE, compression: str = "zstd",
                  flush_interval: float | None = DEFAULT_FLUSH_INTERVAL):
-        from mcap.writer import CompressionType, Writer
-
         if isinstance(chunk_size, bool) or not isinstance(chunk_size, int) or chunk_size < 1024:
             raise ValueError(f"chunk_size: expected an integer >= 1024 [bytes], got {chunk_size!r}")
-        kinds = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE,
-                 "": CompressionType.NONE}
+        kinds = {"zstd": "zstd", "lz4": "lz4", "none": "", "": ""}
         if compression not in kinds:
             raise ValueError(f"compression: expected one of zstd, lz4, none, got {compression!r}")
         if flush_interval is not None and not (flush_interval > 0 and math.isfinite(flush_interval)):
@@ -221,10 +227,11 @@ class McapRecorder:
 
         self._sink = _DirectFile(self.path)
         try:
-            self._writer = Writer(self._sink, chunk_size=chunk_size, compression=kinds[compression])
+            # not mcap.writer.Writer: it keeps every chunk's index in memory (see mcap_stream)
+            self._writer = McapStreamWriter(self._sink, chunk_size=chunk_size, compression=kinds[compression],
+                                            index_dir=self.path.resolve().parent)
             self._writer.start(profile=PROFILE, library=LIBRARY)
-            # Writer.flush() closes the open chunk (mcap >= 1.2); older versions only have the private one
-            self._flush_chunk = getattr(self._writer, "flush", None) or getattr(self._writer, "_Writer__finalize_chunk")
+            self._flush_chunk = self._writer.flush
             if rendered is not None:
                 self._parameters_yaml, self._parameters_flat = rendered
                 self._write_metadata("initial")
@@ -419,6 +426,7 @@ class McapRecorder:
             pass   # the partly written chunk stays; readers stop at the last complete one anyway
         finally:
             self._sink.close()
+            self._writer.close_index()
             atexit.unregister(self._atexit_close)
         raise RecordingWriteError(exc.errno, f"{exc.strerror or exc}; recording stopped, file kept up to its last "
                                   f"complete chunk ({good_pos} bytes)", str(self.path)) from exc
@@ -458,6 +466,7 @@ class McapRecorder:
                 finally:
                     self._closed = True
                     self._sink.close()
+                    self._writer.close_index()
                     atexit.unregister(self._atexit_close)
                 if error is not None:
                     raise error
