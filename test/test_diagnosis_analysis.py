@@ -158,11 +158,6 @@ def test_null_case_says_nothing_missing(reports):
     assert d["findings"] == [] and d["rejected"], "the alternatives tested must be listed"
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "issue #24 symptom 10 exposed it: the verdict is 'not decidable: physics outside the catalogue' (41 % of the "
-    "mechanical residual's held-out power in 78.7-99.2 Hz, against a flat-spectrum share of 20 %: the residual of "
-    "an acceleration differentiated from a noisy angle is blue, not flat); this test passed only because "
-    "nothing_missing meant 'no findings'. Remaining: residual_structure's band reference for differentiated noise"))
 def test_null_case_with_another_noise_seed_and_temperatures_says_nothing_missing():
     sig = make_recording(NOMINAL, duration=12.0, seed=11, temps=True)
     rep = diagnose(sig, NOMINAL, options=DiagnoseOptions(replay=False))

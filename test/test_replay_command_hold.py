@@ -158,9 +158,12 @@ def test_the_true_resistance_behind_a_fast_speed_loop_is_confirmed(fast_loop, mo
 
     _by_log_rate(monkeypatch)     # the old rule: the same recording, the command held for the whole 1 ms sample
     old = diagnose(fast_loop, NOMINAL, options=DiagnoseOptions()).to_dict()
-    assert "resistance_error" not in [x["effect"] for x in old["findings"]]
-    why = {r["effect"]: r.get("reason", "") for r in old["rejected"]}
-    assert "worsens the simulated velocity" in why["resistance_error"]
+    # the held replay makes the simulated velocity worse with the true R (it refused R until issue #24: 0.028 ->
+    # 0.033 rad/s of a 13.6 rad/s signal; a worsening below tolerance x 1 % of the recorded RMS no longer refuses)
+    old_f = {x["effect"]: x for x in old["findings"]}
+    assert "resistance_error" in old_f, old["verdict"]
+    old_sim = old_f["resistance_error"]["simulation"]
+    assert old_sim["other_channel"] == "velocity" and old_sim["other_channel_change"] > 0, old_sim
 
 
 def test_a_command_held_at_the_log_rate_judges_as_before(held_loop, monkeypatch):

@@ -382,6 +382,12 @@ def _why_not_simulated(p: dict[str, dict]) -> str:
 #: oscillates faster, or a drive unlike the model, is replayed from inputs that do not represent it: improving a
 #: 130 rad/s error by 5 % proves nothing)
 REPRODUCE_MAX = 0.5
+#: the other channel's error is taken as at least this fraction of its recorded RMS when judging whether a finding
+#: worsens it (``tolerance`` x that): a replay that reproduces a channel to a hundredth of its signal resolves no
+#: practical worsening below that (issue #24: a noise-free 1 kHz simulate log with twice the Coulomb friction, current
+#: replayed to 0.00064 A of 1.06 A RMS: +0.00014 A "worsened" it and refused a finding that took the velocity error
+#: from 16 to 1.03 rad/s)
+OTHER_CHANNEL_RESOLUTION = 0.01
 
 
 def _verdict(without: dict, with_: dict, ch: str, other: str, z: float, tolerance: float, n: int,
@@ -396,7 +402,8 @@ def _verdict(without: dict, with_: dict, ch: str, other: str, z: float, toleranc
     elif sig and err > REPRODUCE_MAX * sig:
         verdict = (f"not checkable in simulation: the simulated actuator does not reproduce this recording's {ch} "
                    f"(error {err:.3g} RMS = {100 * err / sig:.0f} % of the recorded {sig:.3g} RMS, with every finding)")
-    elif math.isfinite(imp_o) and imp_o < -z * se_o and imp_o < -tolerance * float(np.mean(with_[other])):
+    elif math.isfinite(imp_o) and imp_o < -z * se_o and imp_o < -tolerance * max(
+            float(np.mean(with_[other])), OTHER_CHANNEL_RESOLUTION * float((signal or {}).get(other) or 0.0)):
         verdict = f"worsens the simulated {other}"
     elif imp > z * se and imp > 0:
         verdict = "confirmed"

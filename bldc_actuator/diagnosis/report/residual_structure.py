@@ -5,7 +5,11 @@ For each model equation, the final equation-error residual is explained by bin m
 rows, judged on the held-out rows, so noise cannot pass) of one signal at a time: time, speed, current
 (command) and the mechanical angle; and its power spectrum says which frequency band holds most of it. A
 residual is *structured* when one signal's bins explain at least :data:`MIN_EXPLAINED` of its held-out variance,
-or when a frequency band holds that much more of its held-out power than a flat spectrum would, and *large*
+or when a frequency band holds that much more of its held-out power than the recording's own noise would put
+there (:func:`noise_reference`: sensor noise through the derivatives and the low-pass the equation error uses, its
+levels fitted to the training rows' spectrum; a flat spectrum is wrong for an acceleration differentiated twice from
+a noisy angle, whose noise power rises as f^4 up to the cut-off, and an encoder's error is a line wherever the speed
+dwells: :func:`quantization_paths`), and *large*
 when that structured part is at least :data:`MIN_SIZE` of the equation's own signal (the current for
 the mechanical equation, v_q for the electrical one). Such a residual means the catalogue's effects do not
 describe the data: the verdict is then not "nothing missing" (:mod:`.results`).
@@ -49,6 +53,7 @@ class Structure:
     where_unit: str
     band_hz: tuple[float, float] | None   #: frequency band holding the most residual power
     band_fraction: float         #: its share of the power
+    band_noise_share: float = 0.0   #: the share of the power the recording's noise puts in that band
 
     @property
     def large(self) -> bool:
@@ -61,7 +66,8 @@ class Structure:
         if self.peak_mean == self.peak_mean:
             s += f" (largest {self.peak_mean:+.3g} {self.unit} near {self.follows} {self.peak_at:.3g} {self.where_unit})"
         if self.band_hz:
-            s += f", {100 * self.band_fraction:.0f} % of its power in {self.band_hz[0]:.3g}-{self.band_hz[1]:.3g} Hz"
+            s += (f", {100 * self.band_fraction:.0f} % of its power in {self.band_hz[0]:.3g}-{self.band_hz[1]:.3g} Hz "
+                  f"(its noise would put {100 * self.band_noise_share:.0f} % there)")
         return s
 
     def to_dict(self) -> dict:
@@ -109,6 +115,11 @@ def _band(r: np.ndarray, fs: float, band=None) -> tuple[tuple[float, float] | No
     if len(r) < 64 or not fs > 0:
         return None, 0.0
     f, p = _psd(r, fs)
+    return _band_of(f, p, fs / len(r), band)
+
+
+def _band_of(f: np.ndarray, p: np.ndarray, f_min: float, band=None) -> tuple[tuple[float, float] | None, float]:
+    """:func:`_band` on a spectrum ``p`` over ``f`` (the DC bin left out of the total)."""
     total = float(np.sum(p[1:]))
     if total <= 0:
         return None, 0.0
@@ -116,8 +127,8 @@ def _band(r: np.ndarray, fs: float, band=None) -> tuple[tuple[float, float] | No
         m = (f >= band[0]) & (f < band[1])
         return band, float(np.sum(p[m])) / total
     best, frac = None, 0.0
-    lo = max(f[1], fs / len(r))
-    while lo < fs / 2:
+    lo = max(f[1], f_min)
+    while lo < f[-1]:
         hi = lo * 2 ** (1 / 3)
         m = (f >= lo) & (f < hi)
         share = float(np.sum(p[m])) / total
@@ -127,12 +138,142 @@ def _band(r: np.ndarray, fs: float, band=None) -> tuple[tuple[float, float] | No
     return best, frac
 
 
+#: the noise paths into an equation's residual, as powers of the central difference the derivatives use: a sensor's
+#: white noise as recorded (current, voltage), through one derivative (a speed from the angle, di/dt, dv/dt) and
+#: through two (the acceleration from the angle)
+NOISE_DERIVATIVES = (0, 1, 2)
+
+
+def noise_shapes(f: np.ndarray, dec) -> np.ndarray | None:
+    """Power spectra [k, f] (each peak-normalized) at the decimated rate of white noise at the raw rate taken
+    through ``k`` central differences (:data:`NOISE_DERIVATIVES`), the zero-phase low-pass (``sosfiltfilt``: the
+    Butterworth's gain squared) and the decimation (``dec.q``: the bands above the decimated Nyquist fold back).
+    None without a filter (a steady-state table)."""
+    from scipy.signal import sosfreqz
+
+    if getattr(dec, "steady", False) or getattr(dec, "sos", None) is None:
+        return None
+    fs, q = float(dec.fs), max(1, int(dec.q))
+    fs_dec = fs / q
+    out = np.zeros((len(NOISE_DERIVATIVES), len(f)))
+    for k in range(q + 1):      # aliases k fs_dec +- f inside [0, fs/2]
+        for fa in ((k * fs_dec + f), (k * fs_dec - f)) if k else (f,):
+            m = (fa >= 0) & (fa <= fs / 2)
+            if not m.any():
+                continue
+            _, h = sosfreqz(dec.sos, worN=fa[m], fs=fs)
+            g = np.abs(h) ** 4
+            d2 = (fs * np.sin(2 * math.pi * fa[m] / fs)) ** 2
+            for j, n in enumerate(NOISE_DERIVATIVES):
+                out[j, m] += g * d2 ** n
+    peak = out.max(axis=1, keepdims=True)
+    return out / np.where(peak > 0, peak, 1.0)
+
+
+QUANTIZED_MIN = 0.99     #: fraction of angle samples on one grid for the angle to count as quantized
+
+
+def angle_step(theta: np.ndarray) -> tuple[float, float] | None:
+    """(step [rad], grid offset [rad]) of an angle channel that sits on a grid (an encoder's counts), or None.
+    The step is the smallest spacing of the recorded values that more than :data:`QUANTIZED_MIN` of the samples sit
+    on (within 1 % of it)."""
+    th = theta[np.isfinite(theta)]
+    if len(th) < 64:
+        return None
+    u = np.unique(th)
+    d = np.diff(u)
+    d = d[d > 1e-12 * max(1.0, float(np.max(np.abs(u))))]
+    if len(d) < 2:
+        return None
+    step = float(np.percentile(d, 5))
+    if not step > 0 or float(np.ptp(th)) / step > 1e9:
+        return None
+    frac = th / step - np.round(th / step)
+    off = float(np.angle(np.mean(np.exp(2j * math.pi * frac)))) / (2 * math.pi)
+    dev = np.abs((frac - off + 0.5) % 1.0 - 0.5)
+    if np.mean(dev < 0.01) < QUANTIZED_MIN:
+        return None
+    return step, off * step
+
+
+def _segment_gradient(x: np.ndarray, t: np.ndarray, segments) -> np.ndarray:
+    out = np.zeros_like(x)
+    for a, b in segments:
+        if b - a >= 3:
+            out[a:b] = np.gradient(x[a:b], t[a:b])
+    return out
+
+
+#: the re-made motion a quantization error is re-made on: the angle low-passed at this fraction of the cut-off (the
+#: recorded error's own lines below the cut-off, e.g. a 2086 Hz sawtooth sampled at 1 kHz sits at 86 Hz, must not be
+#: in it: quantizing an angle that holds them again cancels them)
+QUANTIZATION_MOTION_CUTOFF = 0.25
+
+
+def quantization_paths(ctx) -> dict[str, np.ndarray]:
+    """Per equation, the part of its residual the angle's quantization (:func:`angle_step`) makes, at the decimated
+    instants: the error through one and two central differences (the speed and the acceleration the equations take
+    from the angle) and the low-pass, scaled as the equation takes them (mechanical, in current units: -(J dw/dt +
+    b w) / K; electrical: -K w). An encoder's error is not white but a sawtooth at |omega| / step and its harmonics,
+    folded about the log rate: a line wherever the speed dwells (a 0.8 rad/s triangle on a 14-bit encoder logged at 1
+    kHz: 86 Hz). It is re-made by quantizing the angle, low-passed at :data:`QUANTIZATION_MOTION_CUTOFF` x the
+    cut-off, on the recorded grid: its spectrum is the recorded error's, its phase need not be. Empty when the angle
+    is not quantized or the speed is not taken from it."""
+    raw = getattr(ctx, "raw", {}) or {}
+    dec, S = ctx.dec, ctx.sig
+    if "position" not in raw or "theta" not in S or "omega" not in S or getattr(dec, "steady", False) \
+            or getattr(dec, "sos", None) is None:
+        return {}
+    theta = np.asarray(S["theta"], float)
+    grid = angle_step(np.asarray(raw["position"], float))
+    if grid is None or not np.isfinite(theta).all():
+        return {}
+    d1_rec = _segment_gradient(theta, ctx.t, ctx.segments)
+    if not np.allclose(S["omega"], d1_rec, rtol=1e-9, atol=1e-12):
+        return {}               # the speed is the velocity channel's
+    step, off = grid
+    smooth = dec.lowpass(theta, QUANTIZATION_MOTION_CUTOFF * dec.fc)
+    err = step * np.round((smooth - off) / step) + off - smooth
+    d1 = _segment_gradient(err, ctx.t, ctx.segments)
+    d2 = _segment_gradient(d1, ctx.t, ctx.segments)
+    m = ctx.params.motor
+    K = np.asarray(S.get("K", m.torque_constant_q), float)
+    return {"mechanical": dec.apply(-(m.rotor_inertia * d2 + m.viscous_damping * d1) / K),
+            "electrical": dec.apply(-K * d1)}
+
+
+def noise_reference(f: np.ndarray, p: np.ndarray, dec, fixed: np.ndarray | None = None) -> np.ndarray | None:
+    """The spectrum the residual has when it is the recording's own noise: ``fixed`` (a noise path's own spectrum,
+    e.g. of :func:`quantization_paths` on the same rows, on the same ``f``) plus :func:`noise_shapes` with
+    non-negative levels fitted to ``p`` (the training rows' spectrum) up to the cut-off in log power with a robust
+    loss (``soft_l1``), so that a band of structure (a few bins far above the rest) does not set the levels. None
+    when it cannot be formed."""
+    from scipy.optimize import least_squares
+
+    B = noise_shapes(f, dec)
+    if B is None:
+        return None
+    fixed = np.zeros(len(f)) if fixed is None or len(fixed) != len(f) else np.maximum(fixed, 0.0)
+    ok = (f > 0) & (f <= dec.fc) & (p > 0)     # (above the cut-off the filter's skirt, leakage and the joins of
+    if ok.sum() < 8:                            #  the training blocks set the spectrum, not the noise's level)
+        return None
+    lp = np.log(p[ok])
+
+    def res(x):
+        return np.log(np.exp(x) @ B[:, ok] + fixed[ok] + 1e-300) - lp
+
+    x0 = np.full(len(B), float(np.median(lp)))
+    x = least_squares(res, x0, loss="soft_l1", f_scale=0.5).x
+    return np.exp(x) @ B + fixed
+
+
 def find(ctx, fit) -> list[Structure]:
     """The structure of ``fit``'s residual in every equation (large or not; see :attr:`Structure.large`)."""
     out = []
     ho = ctx.holdout_dec
     t = ctx.t_dec
     fs_dec = 1.0 / float(np.median(np.diff(t))) if len(t) > 2 else 0.0
+    qpaths = quantization_paths(ctx)
     for eq, B in ctx.blocks.items():
         r = fit.resid.get(eq)
         if r is None or eq not in _SIGNAL or _SIGNAL[eq][0] not in ctx.sig:
@@ -155,19 +296,27 @@ def find(ctx, fit) -> list[Structure]:
             e, srms, centre, mean = _explained(np.nan_to_num(x), r, train, test, periodic)
             if best is None or e > best[0]:
                 best = (e, srms, centre, mean, what, unit)
-        # a frequency band: chosen on the training rows, its excess share of power (over a flat spectrum up to the
-        # low-pass cut-off) judged on the held-out rows
-        band, _ = _band(r[train], fs_dec)
-        frac = 0.0
+        # a frequency band: chosen on the training rows, its excess share of power over the share the recording's
+        # noise puts there (:func:`noise_reference`, fitted to the training rows; flat up to the low-pass cut-off
+        # when it cannot be formed) judged on the held-out rows
+        band, frac, ref_share = None, 0.0, 0.0
+        if train.sum() >= 64 and test.sum() >= 64 and fs_dec > 0:
+            f, p = _psd(r[train], fs_dec)
+            band, _ = _band_of(f, p, fs_dec / train.sum())
         if band is not None:
             _, frac = _band(r[test], fs_dec, band)
-            flat = (band[1] - band[0]) / max(min(ctx.dec.fc, fs_dec / 2), 1e-9)
-            excess = (frac - flat) / max(1.0 - flat, 1e-9)
+            qp = qpaths.get(eq)
+            ref = noise_reference(f, p, ctx.dec, None if qp is None else _psd(np.nan_to_num(qp[train]), fs_dec)[1])
+            if ref is not None:
+                _, ref_share = _band_of(f, ref, 0.0, band)
+            else:
+                ref_share = (band[1] - band[0]) / max(min(ctx.dec.fc, fs_dec / 2), 1e-9)
+            excess = (frac - ref_share) / max(1.0 - ref_share, 1e-9)
             if excess > (best[0] if best else 0.0):
                 c = 0.5 * (band[0] + band[1])
                 best = (excess, math.sqrt(max(excess, 0.0)) * res_rms, c, float("nan"), "a frequency band", "Hz")
         if best is None:
             continue
         out.append(Structure(eq, B.unit, res_rms, sig_rms, _SIGNAL[eq][1], best[4], best[0], best[1], best[2],
-                             best[3], best[5], band, frac))
+                             best[3], best[5], band, frac, ref_share))
     return out
