@@ -9,8 +9,14 @@ Fixtures
                            nodes to it (``ros_executor.add_node(node)``); they are destroyed at teardown.
     colcon_install_prefix  session-wide ``colcon build`` of this package (see ``colcon_install``).
 
-Plain helpers (``from conftest import wait_for, colcon_install, colcon_env``)
-    wait_for(predicate, timeout)   poll instead of sleeping a fixed time.
+Plain helpers (``from conftest import wait_for, scaled, colcon_install, colcon_env``)
+    wait_for(predicate, timeout)   poll instead of sleeping a fixed time (``timeout`` scaled by the load).
+    scaled(seconds)                a wall-clock bound sized for this machine's load: pass it to every
+                                   ``timeout=`` (subprocess, communicate, Popen.wait, Client) in a test.
+    timeout_factor()               the factor ``scaled`` applies (see its docstring).
+
+Timeouts: pytest-timeout's per-test ``timeout`` (setup.cfg) is multiplied by ``timeout_factor()`` when each test
+starts, so a hung test still fails (after a bounded time) while a slow test on a loaded machine does not.
     colcon_install(workdir)        colcon-build a copy of the package under ``workdir``, return the install prefix.
     colcon_env(prefix)             environment that runs the colcon-installed scripts against that prefix.
 
@@ -46,6 +52,58 @@ DOMAIN_ID_BASE, DOMAIN_ID_MAX = (
     int(x) for x in os.environ.get("BLDC_TEST_DOMAIN_RANGE", "40-101").split("-", 1)
 )
 _domain_counter = itertools.count()
+
+
+# -------------------------------------------------------------------------------------------- timeouts
+
+#: the largest load factor applied (a hung test at load 20 on 2 cores still fails after 10 x its bound)
+MAX_TIMEOUT_FACTOR = 10.0
+
+
+def timeout_factor() -> float:
+    """How much longer than on a quiet machine a wall-clock bound should be: ``$BLDC_TEST_TIMEOUT_FACTOR`` if set,
+    else from the load average: ``1 + load / cores`` (the larger of the 1- and 5-minute loads), within
+    [1, MAX_TIMEOUT_FACTOR]. A quiet machine: 1; load 4 on 2 cores: 3 (a runnable process gets ~2/5 of a core,
+    and ``nice`` less); load 14 on 2 cores: 8."""
+    env = os.environ.get("BLDC_TEST_TIMEOUT_FACTOR")
+    if env:
+        try:
+            factor = float(env)
+        except ValueError:
+            raise pytest.UsageError(
+                f"BLDC_TEST_TIMEOUT_FACTOR={env!r}: expected a number >= 1 (a multiplier of wall-clock bounds)")
+        if not factor >= 1.0:
+            raise pytest.UsageError(
+                f"BLDC_TEST_TIMEOUT_FACTOR={env!r}: expected a number >= 1 (a multiplier of wall-clock bounds)")
+        return factor
+    try:
+        load = max(os.getloadavg()[:2])
+    except OSError:          # no load average on this platform
+        return 1.0
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    return min(MAX_TIMEOUT_FACTOR, max(1.0, 1.0 + load / max(1, cores)))
+
+
+def scaled(seconds: float) -> float:
+    """``seconds`` (a bound that holds on a quiet machine) times :func:`timeout_factor` now."""
+    return seconds * timeout_factor()
+
+
+@pytest.hookimpl(hookwrapper=True, tryfirst=True)
+def pytest_runtest_protocol(item: pytest.Item, nextitem):
+    """Scale the test's pytest-timeout bound (its ``timeout`` marker, else the ini ``timeout``) by the load as
+    it starts; pytest-timeout reads the marker in its own wrapper of this hook, which runs after this one."""
+    marker = item.get_closest_marker("timeout")
+    base = None
+    if marker is not None and (marker.args or "timeout" in marker.kwargs):
+        base = marker.kwargs.get("timeout", marker.args[0] if marker.args else None)
+    elif item.config.pluginmanager.hasplugin("timeout"):
+        base = item.config.getoption("timeout", None) or item.config.getini("timeout")
+    if base:
+        base = float(base)
+        if base > 0:
+            item.add_marker(pytest.mark.timeout(base * timeout_factor()), append=False)
+    yield
 
 
 # --------------------------------------------------------------------------------------------- markers
@@ -160,9 +218,10 @@ def ros_executor(ros_context):
 
 
 def wait_for(predicate: Callable[[], object], timeout: float = 5.0, interval: float = 0.01):
-    """Poll ``predicate`` until it returns something truthy (returned) or ``timeout`` seconds pass
-    (returns the last falsy value, so ``assert wait_for(...)`` reads naturally)."""
-    deadline = time.monotonic() + timeout
+    """Poll ``predicate`` until it returns something truthy (returned) or ``scaled(timeout)`` seconds pass
+    (returns the last falsy value, so ``assert wait_for(...)`` reads naturally). ``timeout`` is the bound on a
+    quiet machine; a passing wait returns as soon as the predicate holds, so the scaling costs nothing."""
+    deadline = time.monotonic() + scaled(timeout)
     while True:
         value = predicate()
         if value or time.monotonic() >= deadline:
@@ -213,7 +272,7 @@ def colcon_install(workdir: Path, source: Path = REPO_ROOT, timeout: float = 600
         "--build-base", str(workdir / "build"), "--install-base", str(workdir / "install"),
         "--event-handlers", "console_cohesion+", "desktop_notification-", "status-", "terminal_title-",
     ]  # fmt: skip
-    result = subprocess.run(cmd, cwd=workdir, env=env, capture_output=True, text=True, timeout=timeout)
+    result = subprocess.run(cmd, cwd=workdir, env=env, capture_output=True, text=True, timeout=scaled(timeout))
     if result.returncode != 0:
         pytest.fail(
             f"colcon build failed (exit {result.returncode}): {' '.join(cmd)}\n"
