@@ -21,7 +21,8 @@ starts, so a hung test still fails (after a bounded time) while a slow test on a
     colcon_env(prefix)             environment that runs the colcon-installed scripts against that prefix.
 
 Markers (applied automatically where a fixture implies them): ``ros`` (uses rclpy),
-``shared_data`` (needs ../shared/data), ``slow`` (seconds or more; deselect with ``-m "not slow"``).
+``shared_data`` (needs ../shared/data), ``slow`` (seconds or more; deselect with ``-m "not slow"``);
+``one_kernel_path`` (set by hand: not rerun on the pure-Python kernel pass of scripts/test.sh).
 """
 
 from __future__ import annotations
@@ -113,6 +114,10 @@ def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", "ros: uses rclpy (a ROS context, nodes, topics)")
     config.addinivalue_line("markers", "slow: takes seconds or more; deselect with -m 'not slow'")
     config.addinivalue_line("markers", "shared_data: needs the real recordings in ../shared/data")
+    config.addinivalue_line(
+        "markers", "one_kernel_path: a check of the layers above the kernel (e.g. a diagnosis round trip) that "
+        "runs on one kernel path; scripts/test.sh's pure-Python pass deselects it (the kernel's two paths are "
+        "compared in test_kernel_paths.py and by the physics tests on both)")
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
@@ -299,5 +304,20 @@ def colcon_env(prefix: Path, base: dict[str, str] | None = None) -> dict[str, st
 
 @pytest.fixture(scope="session")
 def colcon_install_prefix(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """One colcon build of this package per test session (per xdist worker); returns the install prefix."""
-    return colcon_install(tmp_path_factory.mktemp("colcon_ws"))
+    """One colcon build of this package per test run, shared by the pytest-xdist workers (the first to ask
+    builds it under a file lock in the run's common temporary folder, the others wait and reuse it); returns the
+    install prefix."""
+    import fcntl
+
+    base = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        base = base.parent          # the run's folder, above each worker's own
+    workdir, built = base / "colcon_ws_shared", base / "colcon_ws_shared.built"
+    with open(base / "colcon_ws_shared.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)         # released when the file closes
+        if not built.exists():
+            shutil.rmtree(workdir, ignore_errors=True)     # a failed build of another worker
+            workdir.mkdir()
+            colcon_install(workdir)
+            built.write_text("ok\n")
+    return workdir / "install" / PACKAGE
