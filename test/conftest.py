@@ -95,15 +95,15 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem):
     """Scale the test's pytest-timeout bound (its ``timeout`` marker, else the ini ``timeout``) by the load as
     it starts; pytest-timeout reads the marker in its own wrapper of this hook, which runs after this one."""
     marker = item.get_closest_marker("timeout")
-    base = None
-    if marker is not None and (marker.args or "timeout" in marker.kwargs):
-        base = marker.kwargs.get("timeout", marker.args[0] if marker.args else None)
-    elif item.config.pluginmanager.hasplugin("timeout"):
+    args, kwargs = (list(marker.args), dict(marker.kwargs)) if marker is not None else ([], {})
+    base = kwargs.pop("timeout", None)
+    if base is None and args:
+        base = args.pop(0)
+    if base is None and item.config.pluginmanager.hasplugin("timeout"):
         base = item.config.getoption("timeout", None) or item.config.getini("timeout")
-    if base:
-        base = float(base)
-        if base > 0:
-            item.add_marker(pytest.mark.timeout(base * timeout_factor()), append=False)
+    if base and float(base) > 0:       # 0: no timeout
+        # the same marker (its method, func_only) with the scaled bound, ahead of the test's own
+        item.add_marker(pytest.mark.timeout(float(base) * timeout_factor(), *args, **kwargs), append=False)
     yield
 
 
