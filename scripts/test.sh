@@ -35,13 +35,14 @@ both=1
 for a in "$@"; do
     case "$a" in -k|-m|*test*|*::*) both=0 ;; esac
 done
-# A full run spreads over pytest-xdist workers, whole files per worker (module fixtures computed once), unless
-# the arguments choose (-n/--numprocesses/--dist, -p no:xdist) or BLDC_TEST_WORKERS=0.
+# A run of the whole tree (no test paths, no -k selection) spreads over pytest-xdist workers, whole files per
+# worker (module fixtures computed once), unless the arguments choose (-n/--numprocesses/--dist, -p no:xdist)
+# or BLDC_TEST_WORKERS=0.
 workers=()
 if [[ $paths == 0 && "${BLDC_TEST_WORKERS:-2}" != 0 ]]; then
     workers=(-n "${BLDC_TEST_WORKERS:-2}" --dist loadfile)
     for a in "$@"; do
-        case "$a" in -n|-n*|--numprocesses*|--dist*|no:xdist|-pno:xdist) workers=() ;; esac
+        case "$a" in -k|-k*|-n|-n*|--numprocesses*|--dist*|no:xdist|-pno:xdist) workers=() ;; esac
     done
     "$VENV/bin/python" -c "import xdist" 2>/dev/null || workers=()
 fi
