@@ -9,13 +9,20 @@ Fixtures
                            nodes to it (``ros_executor.add_node(node)``); they are destroyed at teardown.
     colcon_install_prefix  session-wide ``colcon build`` of this package (see ``colcon_install``).
 
-Plain helpers (``from conftest import wait_for, colcon_install, colcon_env``)
-    wait_for(predicate, timeout)   poll instead of sleeping a fixed time.
+Plain helpers (``from conftest import wait_for, scaled, colcon_install, colcon_env``)
+    wait_for(predicate, timeout)   poll instead of sleeping a fixed time (``timeout`` scaled by the load).
+    scaled(seconds)                a wall-clock bound sized for this machine's load: pass it to every
+                                   ``timeout=`` (subprocess, communicate, Popen.wait, Client) in a test.
+    timeout_factor()               the factor ``scaled`` applies (see its docstring).
+
+Timeouts: pytest-timeout's per-test ``timeout`` (setup.cfg) is multiplied by ``timeout_factor()`` when each test
+starts, so a hung test still fails (after a bounded time) while a slow test on a loaded machine does not.
     colcon_install(workdir)        colcon-build a copy of the package under ``workdir``, return the install prefix.
     colcon_env(prefix)             environment that runs the colcon-installed scripts against that prefix.
 
 Markers (applied automatically where a fixture implies them): ``ros`` (uses rclpy),
-``shared_data`` (needs ../shared/data), ``slow`` (seconds or more; deselect with ``-m "not slow"``).
+``shared_data`` (needs ../shared/data), ``slow`` (seconds or more; deselect with ``-m "not slow"``);
+``one_kernel_path`` (set by hand: not rerun on the pure-Python kernel pass of scripts/test.sh).
 """
 
 from __future__ import annotations
@@ -53,6 +60,58 @@ DOMAIN_ID_BASE, DOMAIN_ID_MAX = (
 _domain_counter = itertools.count()
 
 
+# -------------------------------------------------------------------------------------------- timeouts
+
+#: the largest load factor applied (a hung test at load 20 on 2 cores still fails after 10 x its bound)
+MAX_TIMEOUT_FACTOR = 10.0
+
+
+def timeout_factor() -> float:
+    """How much longer than on a quiet machine a wall-clock bound should be: ``$BLDC_TEST_TIMEOUT_FACTOR`` if set,
+    else from the load average: ``1 + load / cores`` (the larger of the 1- and 5-minute loads), within
+    [1, MAX_TIMEOUT_FACTOR]. A quiet machine: 1; load 4 on 2 cores: 3 (a runnable process gets ~2/5 of a core,
+    and ``nice`` less); load 14 on 2 cores: 8."""
+    env = os.environ.get("BLDC_TEST_TIMEOUT_FACTOR")
+    if env:
+        try:
+            factor = float(env)
+        except ValueError:
+            raise pytest.UsageError(
+                f"BLDC_TEST_TIMEOUT_FACTOR={env!r}: expected a number >= 1 (a multiplier of wall-clock bounds)")
+        if not factor >= 1.0:
+            raise pytest.UsageError(
+                f"BLDC_TEST_TIMEOUT_FACTOR={env!r}: expected a number >= 1 (a multiplier of wall-clock bounds)")
+        return factor
+    try:
+        load = max(os.getloadavg()[:2])
+    except OSError:          # no load average on this platform
+        return 1.0
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    return min(MAX_TIMEOUT_FACTOR, max(1.0, 1.0 + load / max(1, cores)))
+
+
+def scaled(seconds: float) -> float:
+    """``seconds`` (a bound that holds on a quiet machine) times :func:`timeout_factor` now."""
+    return seconds * timeout_factor()
+
+
+@pytest.hookimpl(hookwrapper=True, tryfirst=True)
+def pytest_runtest_protocol(item: pytest.Item, nextitem):
+    """Scale the test's pytest-timeout bound (its ``timeout`` marker, else the ini ``timeout``) by the load as
+    it starts; pytest-timeout reads the marker in its own wrapper of this hook, which runs after this one."""
+    marker = item.get_closest_marker("timeout")
+    args, kwargs = (list(marker.args), dict(marker.kwargs)) if marker is not None else ([], {})
+    base = kwargs.pop("timeout", None)
+    if base is None and args:
+        base = args.pop(0)
+    if base is None and item.config.pluginmanager.hasplugin("timeout"):
+        base = item.config.getoption("timeout", None) or item.config.getini("timeout")
+    if base and float(base) > 0:       # 0: no timeout
+        # the same marker (its method, func_only) with the scaled bound, ahead of the test's own
+        item.add_marker(pytest.mark.timeout(float(base) * timeout_factor(), *args, **kwargs), append=False)
+    yield
+
+
 # --------------------------------------------------------------------------------------------- markers
 
 
@@ -60,6 +119,10 @@ def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", "ros: uses rclpy (a ROS context, nodes, topics)")
     config.addinivalue_line("markers", "slow: takes seconds or more; deselect with -m 'not slow'")
     config.addinivalue_line("markers", "shared_data: needs the real recordings in ../shared/data")
+    config.addinivalue_line(
+        "markers", "one_kernel_path: a check of the layers above the kernel (e.g. a diagnosis round trip) that "
+        "runs on one kernel path; scripts/test.sh's pure-Python pass deselects it (the kernel's two paths are "
+        "compared in test_kernel_paths.py and by the physics tests on both)")
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
@@ -165,9 +228,10 @@ def ros_executor(ros_context):
 
 
 def wait_for(predicate: Callable[[], object], timeout: float = 5.0, interval: float = 0.01):
-    """Poll ``predicate`` until it returns something truthy (returned) or ``timeout`` seconds pass
-    (returns the last falsy value, so ``assert wait_for(...)`` reads naturally)."""
-    deadline = time.monotonic() + timeout
+    """Poll ``predicate`` until it returns something truthy (returned) or ``scaled(timeout)`` seconds pass
+    (returns the last falsy value, so ``assert wait_for(...)`` reads naturally). ``timeout`` is the bound on a
+    quiet machine; a passing wait returns as soon as the predicate holds, so the scaling costs nothing."""
+    deadline = time.monotonic() + scaled(timeout)
     while True:
         value = predicate()
         if value or time.monotonic() >= deadline:
@@ -218,7 +282,7 @@ def colcon_install(workdir: Path, source: Path = REPO_ROOT, timeout: float = 600
         "--build-base", str(workdir / "build"), "--install-base", str(workdir / "install"),
         "--event-handlers", "console_cohesion+", "desktop_notification-", "status-", "terminal_title-",
     ]  # fmt: skip
-    result = subprocess.run(cmd, cwd=workdir, env=env, capture_output=True, text=True, timeout=timeout)
+    result = subprocess.run(cmd, cwd=workdir, env=env, capture_output=True, text=True, timeout=scaled(timeout))
     if result.returncode != 0:
         pytest.fail(
             f"colcon build failed (exit {result.returncode}): {' '.join(cmd)}\n"
@@ -245,5 +309,20 @@ def colcon_env(prefix: Path, base: dict[str, str] | None = None) -> dict[str, st
 
 @pytest.fixture(scope="session")
 def colcon_install_prefix(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """One colcon build of this package per test session (per xdist worker); returns the install prefix."""
-    return colcon_install(tmp_path_factory.mktemp("colcon_ws"))
+    """One colcon build of this package per test run, shared by the pytest-xdist workers (the first to ask
+    builds it under a file lock in the run's common temporary folder, the others wait and reuse it); returns the
+    install prefix."""
+    import fcntl
+
+    base = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        base = base.parent          # the run's folder, above each worker's own
+    workdir, built = base / "colcon_ws_shared", base / "colcon_ws_shared.built"
+    with open(base / "colcon_ws_shared.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)         # released when the file closes
+        if not built.exists():
+            shutil.rmtree(workdir, ignore_errors=True)     # a failed build of another worker
+            workdir.mkdir()
+            colcon_install(workdir)
+            built.write_text("ok\n")
+    return workdir / "install" / PACKAGE

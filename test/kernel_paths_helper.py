@@ -9,12 +9,14 @@ import os
 import subprocess
 import sys
 
+from conftest import scaled
+
 
 def run_on_kernel_path(script: str, *args: str, no_numba: bool) -> dict:
     env = dict(os.environ)
     env.pop("_ROS_WHEELS_BOOTSTRAP_COMPLETE", None)
     env["BLDC_ACTUATOR_NO_NUMBA"] = "1" if no_numba else "0"
     done = subprocess.run([sys.executable, "-c", script, *args], capture_output=True, text=True, env=env,
-                          timeout=600)
+                          timeout=scaled(600))
     assert done.returncode == 0, done.stderr[-3000:]
     return json.loads(done.stdout)

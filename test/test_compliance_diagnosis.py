@@ -87,7 +87,7 @@ def test_load_state_estimated_from_the_rotor_matches_the_simulated_load(backlash
     assert np.max(np.abs(est_w[late] - w_l[late])) < 0.03 * np.ptp(w_l[late])
     # rigid parameters: the rigid position
     r_th, r_w = load_trajectory(th, w, t, [(0, n)], NOMINAL)
-    np.testing.assert_array_equal(r_th, th / N)
+    np.testing.assert_array_equal(r_th, th / N)      # exact: the same arithmetic in this process
 
 
 def test_compliance_column_filter_is_the_load_decoupling_response():

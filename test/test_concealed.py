@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import scaled
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
@@ -280,7 +281,7 @@ def test_quick_subset_one_effect_one_null(tmp_path):
     out = tmp_path / "results"
     proc = subprocess.run([sys.executable, str(REPO / "benchmarks" / "run_concealed.py"), "--quick",
                            "--data", str(tmp_path / "data"), "--out", str(out), "--diagnose-arg=--no-plots"],
-                          capture_output=True, text=True, timeout=600)
+                          capture_output=True, text=True, timeout=scaled(600))
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     res = json.loads((out / "concealed-quick.json").read_text())
     by = {c["case"]: c for c in res["cases"]}

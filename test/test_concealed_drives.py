@@ -129,6 +129,7 @@ def test_anti_windup_schemes_are_identical_below_the_limit_and_differ_at_it():
     gait = ex.reference(ex.sequence(ex.gait(2.0, 4), lead_in=0.1, blend=0.3))
     below = T.simulate([ideal(T.TruthSpec(drive=T.Drive(anti_windup=s), seed=2)) for s in schemes], [gait] * 3)
     for r in below[1:]:
+        # exact: the same code path (below the limit no scheme acts), same machine, same process
         np.testing.assert_array_equal(r["true_i_q"], below[0]["true_i_q"])
     ref = swings_reference(6.0)
     at = T.simulate([ideal(T.TruthSpec(plant=BUS_16V, drive=T.Drive(anti_windup=s), seed=2)) for s in schemes],
@@ -152,7 +153,7 @@ def test_velocity_filter_lags_a_speed_ramp_by_its_time_constant():
     ref = ex.reference(np.cumsum(w_ref) / 1000.0)
     filt, plain = T.simulate([ideal(T.TruthSpec(drive=T.Drive(velocity_filter=f), seed=3)),
                               ideal(T.TruthSpec(seed=3))], [ref, ref])
-    np.testing.assert_array_equal(plain["velocity"], plain["true_velocity_estimate"])
+    np.testing.assert_array_equal(plain["velocity"], plain["true_velocity_estimate"])  # exact: one run's two channels
     sl = slice(700, 1300)                                          # constant acceleration, settled
     A = np.polyfit(t[sl], filt["true_velocity_estimate"][sl], 1)[0]
     lag = np.mean(filt["true_velocity_estimate"][sl] - filt["velocity"][sl])
@@ -172,7 +173,7 @@ def test_drive_log_holds_every_current_loop_tick_of_the_same_run():
     assert len(tick["time"]) == 10 * len(step["time"])
     assert set(tick) == set(step)
     for key in step:
-        np.testing.assert_array_equal(tick[key][::10], step[key], err_msg=key)
+        np.testing.assert_array_equal(tick[key][::10], step[key], err_msg=key)   # exact: same path, same process
     np.testing.assert_allclose(np.diff(tick["time"]), 1e-4, rtol=1e-6)
     cmd = tick["current_command"].reshape(-1, 10)
     assert np.all(cmd == cmd[:, :1])

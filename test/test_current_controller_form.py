@@ -1,8 +1,8 @@
 """The drive's second current-controller form, ``drive.current_controller: complex_vector``: the 2DOF
 synchronous-frame complex-vector PI whose integrator is driven by the REALIZED voltage (the mean of the previous
 and the ongoing period's voltage, taken in stationary coordinates and rotated back by the present angle), as
-motulator's ``CurrentVectorController`` runs it. The default (``pi``) is bit-identical to the drive before the
-option existed (a stored trace of commit 3d1290a)."""
+motulator's ``CurrentVectorController`` runs it. The default (``pi``) reproduces the drive before the
+option existed (a stored trace of commit 3d1290a, up to another machine's rounding)."""
 
 from __future__ import annotations
 
@@ -18,6 +18,7 @@ from bldc_actuator.params import ActuatorParams, ParameterError
 
 from bldc_actuator.kernel import COMPILED
 
+from roundoff import assert_matches_up_to_roundoff
 from test_controller_params import state_history
 
 #: the default drive's trace written by commit 3d1290a (before the option), on each kernel path (numba calls libm,
@@ -35,13 +36,17 @@ TRACE_CASES = {
 
 
 @pytest.mark.parametrize("case", sorted(TRACE_CASES))
-def test_default_pi_is_bit_identical_to_the_stored_trace(case):
+def test_default_pi_reproduces_the_stored_trace(case):
     ref = np.load(DATA)[case]
     p = BASE.replace(**TRACE_CASES[case])
     assert p.drive.current_controller == "pi"
     got = state_history(p, n=1500)   # the stored trace's run
     assert np.ptp(got[:, 2]) > 50.0            # it moves
-    np.testing.assert_array_equal(got, ref)
+    # the trace was written on another machine: equal up to its rounding (test/roundoff.py), also when read there
+    # (issue #25: a fixture's elements off by up to 3.9e-12 relative on another CPU of the same kind)
+    assert_matches_up_to_roundoff(got, ref, axis=0, err_msg=case)
+    rounded_elsewhere = ref * (1.0 + 3.9e-12 * np.random.default_rng(25).uniform(-1.0, 1.0, ref.shape))
+    assert_matches_up_to_roundoff(got, rounded_elsewhere, axis=0, err_msg=f"{case} (rounded as on another CPU)")
     # the complex-vector form on the same run differs (the test can fail)
     cv = state_history(p.replace(**{"drive.current_controller": "complex_vector"}), n=300)
     assert np.max(np.abs(cv[:, 1] - ref[:300, 1])) > 1e-4

@@ -128,6 +128,9 @@ def _recording(truth: ActuatorParams, seed: int, duration: float = 12.0, rate: f
     return closed_loop_recording(truth, NOMINAL, reference, duration=duration, rate=rate, seed=seed)
 
 
+# the diagnosis on top of the kernel: once, on the compiled path (on the pure-Python pass it took > 600 s at
+# load 10, issue #25; the kernel's dead-time terms are checked on both paths above)
+@pytest.mark.one_kernel_path
 def test_dead_time_on_a_delta_motor_is_found_written_and_simulated():
     """Delta motor, each leg 0.4 V short (t_d f_pwm V_bus): diagnose names dead_time, writes drive.dead_time
     within 10 % of the truth (the q-equivalent 2.70 V_dt = 1.08 V, not the wye 0.624 V), and the short-window

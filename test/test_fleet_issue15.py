@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 
 import pytest
+from conftest import scaled
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
@@ -115,7 +116,7 @@ def test_dask_scheduler_with_two_workers_gives_identical_results(issue_fleet, lo
                               env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
     out = tmp_path / "out"
     try:
-        t_end = time.monotonic() + 60
+        t_end = time.monotonic() + scaled(60)
         while not sched_file.exists() and time.monotonic() < t_end:
             time.sleep(0.2)
         assert sched_file.exists(), "scheduler did not start"
@@ -124,19 +125,19 @@ def test_dask_scheduler_with_two_workers_gives_identical_results(issue_fleet, lo
         for _ in range(2):
             procs.append(subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address,
                                            "--host", "127.0.0.1", "--nthreads", "1", "--no-dashboard",
-                                           "--death-timeout", "60"],
+                                           "--death-timeout", str(int(scaled(60)))],
                                           env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
         from distributed import Client
 
-        with Client(address, timeout="30s") as c:
-            c.wait_for_workers(2, timeout=60)
+        with Client(address, timeout=f"{scaled(30):.0f}s") as c:
+            c.wait_for_workers(2, timeout=scaled(60))
         assert _cli(root, out, "--scheduler", address) == 0
     finally:
         for p in reversed(procs):
             p.terminate()
         for p in procs:
             try:
-                p.wait(timeout=20)
+                p.wait(timeout=scaled(20))
             except subprocess.TimeoutExpired:
                 p.kill()
     doc = json.loads((out / "alerts.json").read_text())

@@ -59,9 +59,11 @@ def test_compiled_kernel_equals_python_fallback_to_1e12():
     assert a[first, 3].min() < -50.0 and a[first, 3].max() > 50.0
     scale = np.maximum(np.max(np.abs(b), axis=0), 1.0)
     rel = np.abs(a - b) / scale
-    assert rel[first].max() < 1e-12
+    # 1e-12 here; 1e-10 leaves room for another CPU's libm/SIMD rounding (issue #25: 3.9e-12 between machines),
+    # 1000x below what a 1 ppm parameter change moves (test/roundoff.py)
+    assert rel[first].max() < 1e-10
     # The two paths differ only in the last bit of exp/sin (numba calls libm, numpy has its own SIMD
     # routines); stick-slip and derating amplify that over seconds, so the whole 3 s run agrees to 1e-9.
     assert rel.max() < 1e-9
     np.testing.assert_allclose(fast["energy"], slow["energy"], rtol=1e-9, atol=1e-12)
-    np.testing.assert_allclose(fast["batch"], slow["batch"], rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(fast["batch"], slow["batch"], rtol=1e-10, atol=1e-12)

@@ -311,7 +311,11 @@ def test_real_time_reaches_analytic_steady_speed(ros_context, ros_executor):
     exact, _ = steady_speed_analytic(params(node), st.T_winding, st.T_housing, 0.0, 1.0 / 0.091)
     assert js.velocity[0] == pytest.approx(exact, rel=1e-6)          # full steady state of the model
     stamps = [t_of(m.header.stamp) for m in probe.get("/joint_states")]
-    assert all(b - a == node.period_ns for a, b in zip(stamps, stamps[1:]))   # no gap, no duplicate
+    steps = [b - a for a, b in zip(stamps, stamps[1:])]
+    assert all(d > 0 and d % node.period_ns == 0 for d in steps), steps     # on the period grid, no duplicate
+    # no gap while the node keeps time; a CPU-starved node (slips, reported) lets the transport drop samples
+    # (a run with -n 2 at load 15 on 2 cores: real time 0.24, 5 slips, gaps in what the probe received)
+    assert node.slips > 0 or all(d == node.period_ns for d in steps), steps
 
 
 def test_faster_than_real_time_with_clock(ros_context, ros_executor):

@@ -11,7 +11,7 @@ import pytest
 
 pytest.importorskip("rclpy")
 
-from conftest import wait_for  # noqa: E402
+from conftest import scaled, wait_for  # noqa: E402
 from node_helpers import Probe, make_node  # noqa: E402
 
 T = 10.0
@@ -39,7 +39,8 @@ def test_per_joint_command_topic_created_when_a_publisher_appears_and_obeyed(ros
     t0 = time.monotonic()
     probe.connect(topic, Float64)           # waits until the node subscribed (graph poll + discovery)
     waited = time.monotonic() - t0
-    assert waited < 5.0, f"subscription took {waited:.1f} s (poll every second)"
+    # 5 s on a quiet machine (the graph is polled every second), scaled by the load
+    assert waited < scaled(5.0), f"subscription took {waited:.1f} s (poll every second)"
     assert node.topics[1].sub_current is not None and node.topics[0].sub_current is None   # only that topic
     probe.publish(topic, Float64(data=3.0))
     knee, hip = node.joints[1], node.joints[0]

@@ -15,7 +15,7 @@ import pytest
 pytest.importorskip("rclpy")
 pytest.importorskip("mcap")
 
-from conftest import PACKAGE, colcon_env, next_domain_id, wait_for  # noqa: E402
+from conftest import PACKAGE, colcon_env, next_domain_id, scaled, wait_for  # noqa: E402
 
 from bldc_actuator.recording import read_recording, summarize  # noqa: E402
 
@@ -47,7 +47,7 @@ def test_console_script_runs_to_max_sim_time_with_params_file(tmp_path):
                                   "      max_sim_time: 0.2\n      joint_name: wrist\n")
     rec = tmp_path / "run.mcap"
     result = subprocess.run([str(venv_script()), "--record", str(rec), "--ros-args", "--params-file", str(pfile)],
-                            env=env_for(), capture_output=True, text=True, timeout=60)
+                            env=env_for(), capture_output=True, text=True, timeout=scaled(60))
     assert result.returncode == 0, result.stdout + result.stderr
     info = summarize(rec)
     assert info["finalized"] and info["end_ns"] == 200_000_000
@@ -56,7 +56,7 @@ def test_console_script_runs_to_max_sim_time_with_params_file(tmp_path):
 
 def test_bad_parameter_exits_with_a_clear_message(tmp_path):
     result = subprocess.run([str(venv_script()), "--ros-args", "-p", "drive.trip_temperature:=50.0"],
-                            env=env_for(), capture_output=True, text=True, timeout=60)
+                            env=env_for(), capture_output=True, text=True, timeout=scaled(60))
     assert result.returncode == 2
     assert "drive.trip_temperature" in result.stderr and "derate_temperature" in result.stderr
     assert "Traceback" not in result.stderr
@@ -65,7 +65,7 @@ def test_bad_parameter_exits_with_a_clear_message(tmp_path):
 def test_unknown_top_level_parameter_exits_2_naming_the_nearest():
     """``-p presett:=ak80_9`` (a typo of ``preset``) must not run the built-in motor: exit 2, named."""
     result = subprocess.run([str(venv_script()), "--ros-args", "-p", "presett:=ak80_9"],
-                            env=env_for(), capture_output=True, text=True, timeout=60)
+                            env=env_for(), capture_output=True, text=True, timeout=scaled(60))
     assert result.returncode == 2, result.stdout + result.stderr
     assert "presett" in result.stderr and "did you mean 'preset'" in result.stderr
     assert "Traceback" not in result.stderr
@@ -91,7 +91,7 @@ def test_signal_finalizes_the_recording(tmp_path, sig, executor):
         time.sleep(0.2)
         assert proc.poll() is None, proc.communicate()
         proc.send_signal(sig)
-        out, err = proc.communicate(timeout=30)
+        out, err = proc.communicate(timeout=scaled(30))
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -119,7 +119,7 @@ def test_exception_in_the_node_still_finalizes_the_recording(tmp_path):
         f"sys.exit(node.main(['actuator_node', '--record', {str(rec)!r},\n"
         "                    '--ros-args', '-p', 'node.time_factor:=0.0']))\n"
     )
-    result = subprocess.run([sys.executable, "-c", code], env=env_for(), capture_output=True, text=True, timeout=60)
+    result = subprocess.run([sys.executable, "-c", code], env=env_for(), capture_output=True, text=True, timeout=scaled(60))
     assert result.returncode != 0 and "injected fault" in result.stderr
     recording = read_recording(rec)
     assert recording.finalized and len(recording.topics["/joint_states"]) == 101
@@ -133,7 +133,7 @@ def test_colcon_installed_node_runs_with_params_file_and_preset(colcon_install_p
     rec = tmp_path / "colcon.mcap"
     result = subprocess.run([str(exe), "--ros-args", "--params-file", str(pfile), "-p", f"node.record:={rec}"],
                             env=env_for(colcon_env(colcon_install_prefix)), cwd=tmp_path,
-                            capture_output=True, text=True, timeout=120)
+                            capture_output=True, text=True, timeout=scaled(120))
     assert result.returncode == 0, result.stdout + result.stderr
     recording = read_recording(rec)
     assert recording.finalized

@@ -12,7 +12,7 @@ from importlib import metadata
 from pathlib import Path
 
 import pytest
-from conftest import DOMAIN_ID_BASE, DOMAIN_ID_MAX, PACKAGE, REPO_ROOT, colcon_env, next_domain_id, wait_for
+from conftest import DOMAIN_ID_BASE, DOMAIN_ID_MAX, PACKAGE, REPO_ROOT, colcon_env, next_domain_id, scaled, wait_for
 
 import bldc_actuator
 
@@ -87,7 +87,7 @@ def test_test_sh_treats_no_collected_tests_as_success():
         pytest.skip("runs scripts/test.sh, which uses <repo>/.venv; this interpreter is not that venv")
     result = subprocess.run(
         ["bash", str(REPO_ROOT / "scripts" / "test.sh"), "-q", "-p", "no:cacheprovider", "-k", "no_such_test_xyz"],
-        capture_output=True, text=True, timeout=300,
+        capture_output=True, text=True, timeout=scaled(300),
     )  # fmt: skip
     assert result.returncode == 0, result.stdout + result.stderr
     assert "collected no tests" in result.stderr
@@ -95,7 +95,7 @@ def test_test_sh_treats_no_collected_tests_as_success():
 
 def _fresh(code: str) -> str:
     """Run ``code`` in a new interpreter (this one has imported everything already); its stdout."""
-    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=scaled(120),
                             cwd=REPO_ROOT, env={k: v for k, v in os.environ.items() if k != "PYTHONSTARTUP"})
     assert result.returncode == 0, result.stderr
     return result.stdout
@@ -154,12 +154,12 @@ def test_colcon_installed_cli_runs_from_install(colcon_install_prefix: Path):
     # cwd away from the checkout: `python -c` puts the cwd first on sys.path
     where = subprocess.run(
         [sys.executable, "-c", "import bldc_actuator; print(bldc_actuator.__file__)"],
-        env=env, cwd=prefix, capture_output=True, text=True, timeout=60, check=True,
+        env=env, cwd=prefix, capture_output=True, text=True, timeout=scaled(60), check=True,
     ).stdout.strip()  # fmt: skip
     assert Path(where).resolve().is_relative_to(prefix.resolve()), where
     result = subprocess.run(
         [str(prefix / "lib" / PACKAGE / "bldc-actuator"), "--help"],
-        env=env, cwd=prefix, capture_output=True, text=True, timeout=60,
+        env=env, cwd=prefix, capture_output=True, text=True, timeout=scaled(60),
     )  # fmt: skip
     assert result.returncode == 0, result.stdout + result.stderr
     assert "bldc-actuator" in result.stdout
@@ -167,7 +167,7 @@ def test_colcon_installed_cli_runs_from_install(colcon_install_prefix: Path):
     found = subprocess.run(
         [sys.executable, "-c", "from bldc_actuator.diagnosis.io import input_profiles as ip\n"
          "for p in ip.available(): print(p.name, p.path)"],
-        env=env, cwd=prefix, capture_output=True, text=True, timeout=60, check=True,
+        env=env, cwd=prefix, capture_output=True, text=True, timeout=scaled(60), check=True,
     ).stdout.split("\n")  # fmt: skip
     found = dict(line.split(" ", 1) for line in found if line)
     assert set(found) == {p.stem for p in (REPO_ROOT / "config" / "input_profiles").glob("*.yaml")} != set()

@@ -29,6 +29,7 @@ import textwrap
 from pathlib import Path
 
 import pytest
+from conftest import scaled
 
 from bldc_actuator import params as P
 from bldc_actuator.recording import (
@@ -441,7 +442,7 @@ def test_killed_recorder_loses_at_most_the_last_chunk(msgs, tmp_path):
     path = tmp_path / "crash.mcap"
     n = 12000
     out = subprocess.run([sys.executable, "-c", CRASH_CHILD, str(path), str(n)], capture_output=True, text=True,
-                         timeout=120, cwd=REPO)
+                         timeout=scaled(120), cwd=REPO)
     assert out.returncode == 0, out.stderr
     assert int(out.stdout.split()[0]) == n
     r = read_recording(path)
@@ -507,7 +508,7 @@ def test_signal_finalizer_closes_the_file(msgs, tmp_path, signum, returncode):
     try:
         assert proc.stdout.readline().strip() == "ready"
         proc.send_signal(signum)
-        _, err = proc.communicate(timeout=60)
+        _, err = proc.communicate(timeout=scaled(60))
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -534,7 +535,7 @@ def test_an_ignored_sigint_stays_ignored(msgs, tmp_path):
         with pytest.raises(subprocess.TimeoutExpired):
             proc.wait(timeout=1.0)          # still running: the ignored SIGINT did nothing
         proc.send_signal(signal.SIGTERM)
-        _, err = proc.communicate(timeout=60)
+        _, err = proc.communicate(timeout=scaled(60))
     finally:
         if proc.poll() is None:
             proc.kill()
