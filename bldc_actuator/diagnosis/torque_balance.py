@@ -37,6 +37,7 @@ import numpy as np
 
 from ..effects import cogging_torque
 from .effects import Route, WriteBack, registry
+from .frame.least_squares import ols
 from .signals import Signals
 
 #: the finding of an angle-locked ripple in the measured torque (this route's own effect)
@@ -67,6 +68,7 @@ class Term:
     delta_bic: float
     accepted: bool
     reason: str = ""
+    simulation: dict | None = None    #: a route's held-out replay of the term, where it has one (voltage mode)
 
 
 @dataclass
@@ -156,18 +158,6 @@ def _blocks(n: int, frac: float, nblocks: int = 10) -> np.ndarray:
     return mask
 
 
-def _lstsq(X: np.ndarray, y: np.ndarray):
-    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
-    r = y - X @ coef
-    dof = max(1, len(y) - X.shape[1])
-    s2 = float(r @ r) / dof
-    try:
-        cov = s2 * np.linalg.inv(X.T @ X)
-    except np.linalg.LinAlgError:
-        cov = np.full((X.shape[1], X.shape[1]), np.nan)
-    return coef, cov, r
-
-
 def _bic(rss: float, n: int, k: int) -> float:
     return n * math.log(max(rss, 1e-300) / n) + k * math.log(n)
 
@@ -192,7 +182,7 @@ def _consistent(th, r, order, om, both_ways) -> tuple[bool, str]:
         if m.sum() < 20:
             return False, f"too few samples in one of the {label}"
         X = np.column_stack([np.cos(order * th[m]), np.sin(order * th[m])])
-        coef, cov, _ = _lstsq(X, r[m])
+        coef, cov, _ = ols(X, r[m])
         fits.append((complex(coef[0], coef[1]), float(np.sqrt(max(cov[0, 0] + cov[1, 1], 0.0)))))
     (z1, s1), (z2, s2) = fits
     a1, a2 = abs(z1), abs(z2)
@@ -264,7 +254,7 @@ def fit_order(theta: np.ndarray, r: np.ndarray, order: float) -> tuple[complex, 
     """Least-squares ``a cos(k theta) + b sin(k theta)`` of ``r`` at ``order`` k: (a + i b, white-noise SD of a
     and b from the fit's residual)."""
     X = np.column_stack([np.cos(order * theta), np.sin(order * theta)])
-    coef, cov, _ = _lstsq(X, r)
+    coef, cov, _ = ols(X, r)
     return complex(coef[0], coef[1]), float(math.sqrt(max(0.5 * (cov[0, 0] + cov[1, 1]), 0.0)))
 
 
@@ -435,7 +425,7 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, max_harmonics: int =
 
     def fit(keys, rows):
         X = np.column_stack([cols[k][rows] for k in keys])
-        return _lstsq(X, y[rows])
+        return ols(X, y[rows])
 
     def heldout(keys):
         coef, _, _ = fit(keys, train)

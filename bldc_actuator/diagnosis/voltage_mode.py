@@ -30,7 +30,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .frame.least_squares import ols
 from .signals import Signals
+from .torque_balance import Term
 
 BIC_GATE = 10.0
 #: fraction of a sample the electrical time constant must reach for its lag to be modelled
@@ -81,18 +83,6 @@ def effect_for(field_name: str) -> str:
 
 
 # --------------------------------------------------------------------------------------------- records
-
-@dataclass
-class Term:
-    effect: str
-    parameters: dict
-    uncertainty: dict
-    units: dict
-    held_out: dict
-    delta_bic: float
-    accepted: bool
-    reason: str = ""
-    simulation: dict | None = None
 
 
 @dataclass
@@ -228,15 +218,6 @@ def _intervals(c: _Columns, w_eps: float, viscous_share: float = 0.0, gear: floa
     return starts, y, cols, mean
 
 
-def _lstsq(X: np.ndarray, y: np.ndarray):
-    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
-    r = y - X @ coef
-    s2 = float(r @ r) / max(1, len(y) - X.shape[1])
-    try:
-        cov = s2 * np.linalg.inv(X.T @ X)
-    except np.linalg.LinAlgError:
-        cov = np.full((X.shape[1], X.shape[1]), np.nan)
-    return coef, cov, r
 
 
 def _bic(rss: float, n: int, k: int) -> float:
@@ -406,7 +387,7 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
 
     def fit(free, sel):
         X = np.column_stack([cols[k][sel] for k in keys(free)])
-        return _lstsq(X, base[sel])
+        return ols(X, base[sel])
 
     def heldout(free):
         coef, _, _ = fit(free, train)
@@ -609,8 +590,8 @@ def _torque_dependent_friction(cols, base, free_keys, final, K, n, test, train, 
     X1 = np.column_stack([X0, col])
     out = []
     for X in (X0, X1):
-        c_, cov_, r_ = _lstsq(X, base)
-        ct, _, _ = _lstsq(X[train], base[train])
+        c_, cov_, r_ = ols(X, base)
+        ct, _, _ = ols(X[train], base[train])
         out.append((c_, cov_, float(r_ @ r_), float(np.sqrt(np.mean((base[test] - X[test] @ ct) ** 2)))))
     dbic = _bic(out[0][2], n, X0.shape[1]) - _bic(out[1][2], n, X1.shape[1])
     if not (dbic > BIC_GATE and out[1][3] < out[0][3]):

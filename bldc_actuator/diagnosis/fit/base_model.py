@@ -32,6 +32,7 @@ import numpy as np
 
 from ...params import keep_controller_of
 from ..frame import simulate
+from ..frame.least_squares import ols
 
 #: |correlation| of two fitted core estimates beyond which they are reported as their identifiable combination
 COLLINEAR = 0.99
@@ -63,13 +64,8 @@ def _fit(ctx):
     X, y = X[good], y[good]
     if len(y) < 50 or np.std(X[:, 2]) == 0 or np.std(X[:, 0]) == 0:
         return None
-    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
-    r = y - X @ coef
+    coef, cov, r = ols(X, y)
     s2 = float(r @ r) / max(1, len(y) - X.shape[1])
-    try:
-        cov = s2 * np.linalg.inv(X.T @ X)
-    except np.linalg.LinAlgError:
-        cov = np.full((3, 3), np.nan)
     nominal = {"phase_resistance": m.phase_resistance, "q_inductance": m.q_inductance,
                "torque_constant_q": m.torque_constant_q}
     return names, coef, cov, {k: X[:, i] for i, k in enumerate(names)}, nominal, math.sqrt(s2)
