@@ -8,33 +8,9 @@ from bldc_actuator.params import load_preset
 from bldc_actuator.plant import ActuatorPlant
 from bldc_actuator import scheduler as S
 from bldc_actuator.scheduler import OK, WARN, Scheduler, SchedulerConfig
+from test_node_scheduler import FakeClock, ListLog
 
-PACE_HOLD_NS = getattr(S, "PACE_HOLD_NS", 5_000_000_000)
-
-
-class ListLog:
-    def __init__(self):
-        self.lines: list[tuple[str, str]] = []
-
-    def info(self, m):
-        self.lines.append(("info", m))
-
-    def warning(self, m):
-        self.lines.append(("warning", m))
-
-    def error(self, m):
-        self.lines.append(("error", m))
-
-    def having(self, text):
-        return [m for _, m in self.lines if text in m]
-
-
-class FakeClock:
-    def __init__(self, t=1_000_000_000):
-        self.t = t
-
-    def __call__(self):
-        return self.t
+PACE_HOLD_NS = S.PACE_HOLD_NS
 
 
 def make(joints=("hip", "knee"), **cfg):
