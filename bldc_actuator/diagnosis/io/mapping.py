@@ -252,12 +252,16 @@ class Expression:
 def compile_expression(expr: str) -> tuple[str, float, float] | Expression:
     """``expr`` as (source, scale, offset) when it is affine in one column (the form every reader takes), else
     an :class:`Expression` over several columns. Text the grammar cannot read (an MCAP reference such as
-    ``/joint_states.velocity[0]``) goes to :func:`parse_expression`."""
+    ``/joint_states.velocity[0]``) goes to :func:`parse_expression`, and so does every source with a bracket:
+    a header with its unit (``t [s]``, ``i_q [A]*2``) is one column, as before the expression grammar (which would
+    read ``t [s]`` as ``t`` indexed by ``s``); a name the grammar cannot read otherwise is quoted (``"motor-speed"``)."""
+    text = expr.strip()
+    if "[" in text or "{" in text:      # units in brackets, MCAP references, {j} templates
+        return parse_expression(expr)
     try:
         e = Expression.parse(expr)
     except ValueError as exc:
-        text = expr.strip()
-        if text.startswith("/") or any(c in text for c in "[{"):      # MCAP references, {j} templates
+        if text.startswith("/"):      # MCAP references
             return parse_expression(expr)
         raise exc from None
     form = e.affine()
