@@ -222,3 +222,15 @@ class Signals:
         lines += [f"  issue: {i}" for i in self.issues]
         lines += [f"  note: {n}" for n in self.meta.get("notes", [])]
         return "\n".join(lines)
+
+
+def fill_gaps(x: np.ndarray) -> np.ndarray:
+    """A copy of ``x`` with its non-finite samples interpolated linearly from their finite neighbours (by index;
+    held flat beyond the ends); all zeros where nothing is finite."""
+    x = np.asarray(x, float).copy()
+    ok = np.isfinite(x)
+    if ok.all() or not ok.any():
+        return np.nan_to_num(x)
+    idx = np.arange(len(x))
+    x[~ok] = np.interp(idx[~ok], idx[ok], x[ok])
+    return x

@@ -38,7 +38,7 @@ import numpy as np
 from ..effects import cogging_torque
 from .effects import Route, WriteBack, registry
 from .frame.least_squares import ols
-from .signals import Signals
+from .signals import Signals, fill_gaps
 
 #: the finding of an angle-locked ripple in the measured torque (this route's own effect)
 RIPPLE_EFFECT = registry.one(lambda e: e.route is Route.TORQUE_BALANCE).name
@@ -115,34 +115,24 @@ def motion(sig: Signals) -> tuple[np.ndarray, np.ndarray, np.ndarray, str]:
     th = ch.get("position")
     how = "position channel (encoder)"
     if w is None or not np.isfinite(w).any():
-        w = _per_segment(sig, lambda t, a, b: np.gradient(_fill(th[a:b]), t))
+        w = _per_segment(sig, lambda t, a, b: np.gradient(fill_gaps(th[a:b]), t))
         how += "; speed differentiated from it"
     if th is None or not np.isfinite(th).any():
         def integ(t, a, b):
-            v = _fill(w[a:b])
+            v = fill_gaps(w[a:b])
             return np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))])
         th = _per_segment(sig, integ)
         how = ("integrated from the speed (no encoder column): phase relative to the start of each segment, "
                "drifts with the speed sensor's offset")
 
     def acc(t, a, b):
-        v = _fill(w[a:b])
+        v = fill_gaps(w[a:b])
         n = b - a
         win = min(n - (1 - n % 2), max(5, int(round(0.02 / max(np.median(np.diff(t)), 1e-9))) | 1))
         if win < 5:
             return np.gradient(v, t)
         return savgol_filter(v, win, 2, deriv=1, delta=float(np.median(np.diff(t))))
     return th, w, _per_segment(sig, acc), how
-
-
-def _fill(x: np.ndarray) -> np.ndarray:
-    x = np.asarray(x, float).copy()
-    ok = np.isfinite(x)
-    if ok.all() or not ok.any():
-        return np.nan_to_num(x)
-    idx = np.arange(len(x))
-    x[~ok] = np.interp(idx[~ok], idx[ok], x[ok])
-    return x
 
 
 def _blocks(n: int, frac: float, nblocks: int = 10) -> np.ndarray:

@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .frame.least_squares import ols
-from .signals import Signals
+from .signals import Signals, fill_gaps
 from .torque_balance import Term
 
 BIC_GATE = 10.0
@@ -110,16 +110,6 @@ class VoltageModeResult:
 
 # --------------------------------------------------------------------------------------------- signals
 
-def _fill(x: np.ndarray) -> np.ndarray:
-    x = np.asarray(x, float).copy()
-    ok = np.isfinite(x)
-    if ok.all() or not ok.any():
-        return np.nan_to_num(x)
-    idx = np.arange(len(x))
-    x[~ok] = np.interp(idx[~ok], idx[ok], x[ok])
-    return x
-
-
 def _lag(x: np.ndarray, a: float, tau_over_dt: float) -> np.ndarray:
     """The first-order lag 1/(1 + τ s) of ``x`` linear between samples (exact for that input), started at x_0:
     y_k = a y_(k-1) + b0 x_k + b1 x_(k-1), a = exp(-dt/τ)."""
@@ -164,8 +154,8 @@ def _columns(sig: Signals, tau_e: float) -> tuple[_Columns, bool, str]:
             continue
         t = sig.time[s:e]
         dt = float(np.median(np.diff(t)))
-        v = _fill(ch["voltage_q"][s:e])
-        w = _fill(ch["velocity"][s:e]) if _has(sig, "velocity") else np.gradient(_fill(ch["position"][s:e]), t)
+        v = fill_gaps(ch["voltage_q"][s:e])
+        w = fill_gaps(ch["velocity"][s:e]) if _has(sig, "velocity") else np.gradient(fill_gaps(ch["position"][s:e]), t)
         win = min(e - s - (1 - (e - s) % 2), max(5, int(round(0.02 / max(dt, 1e-9))) | 1))
         vf, wf = v, w
         if tau_e >= TAU_E_RESOLVED * dt:
@@ -175,7 +165,7 @@ def _columns(sig: Signals, tau_e: float) -> tuple[_Columns, bool, str]:
         cols["v"][s:e], cols["w_f"][s:e], cols["w"][s:e] = vf, wf, savgol_filter(w, win, 2)
         cols["w_raw"][s:e], cols["v_raw"][s:e] = w, v
         if th is not None:
-            th[s:e] = _fill(ch["position"][s:e])
+            th[s:e] = fill_gaps(ch["position"][s:e])
         seg[s:e] = k
     ok = np.all([np.isfinite(c) for c in cols.values()], axis=0) & (seg >= 0)
     return _Columns(sig.time, cols["v"], cols["w_f"], cols["w"], cols["w_raw"], cols["v_raw"], seg, ok, m, th), \
