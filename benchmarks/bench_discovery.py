@@ -36,6 +36,8 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
+sys.path.insert(0, str(HERE))
+from bench_node_floor import CONTROLLER, node_command  # noqa: E402  (the floor benchmark's node and controller)
 
 PROBE = r"""
 import json, sys, time
@@ -82,25 +84,12 @@ def env_for(args) -> dict:
     return env
 
 
-def node_command(joints: int, extra: list[str]) -> list[str]:
-    names = [f"j{k}" for k in range(joints)]
-    ros = ["--ros-args", "-p", f"joints:=[{', '.join(names)}]"]
-    for n in names:
-        ros += ["-p", f"joint.{n}.preset:=ak80_9"]
-    own = [a for a in extra if a.startswith("--executor")]
-    return [sys.executable, "-c", "import sys; from bldc_actuator.node import main; sys.exit(main(sys.argv))",
-            *own, *ros, *[a for a in extra if a not in own]]
-
-
 def one_try(args) -> dict:
     env = env_for(args)
     if args.cold_cache:   # a fresh clone's first start: the kernel compiles (numba's on-disk cache is empty)
         env["NUMBA_CACHE_DIR"] = tempfile.mkdtemp(prefix="bench_discovery_numba_")
     busy = [subprocess.Popen([sys.executable, "-c", BUSY], env=env) for _ in range(args.load)]
     if args.controller:   # a controller process streaming ~/commands (bench_node_floor.py's) from the start
-        sys.path.insert(0, str(HERE))
-        from bench_node_floor import CONTROLLER
-
         busy.append(subprocess.Popen([sys.executable, "-c", CONTROLLER, str(args.joints), str(args.controller),
                                       "sine"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
     probe_cmd = [sys.executable, "-c", PROBE, "bldc_actuator", "/joint_states", str(args.timeout)]
