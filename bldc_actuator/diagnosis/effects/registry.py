@@ -12,9 +12,13 @@ import importlib
 import pkgutil
 from typing import Callable, Iterable
 
+from .forms import Forms
 from .record import Effect, Route
 
-_NOT_EFFECTS = frozenset({"record", "registry"})
+_NOT_EFFECTS = frozenset({"record", "registry", "forms"})
+
+
+_FORMS: dict[str, Forms | None] = {}
 
 
 @functools.lru_cache(maxsize=1)
@@ -33,6 +37,10 @@ def _catalogue() -> dict[str, Effect]:
             raise ValueError(f"effect module {mod.__name__} holds effect {eff.name!r}: the module is named after its "
                              f"effect")
         found.append(eff)
+        forms = getattr(mod, "FORMS", None)
+        if forms is not None and not isinstance(forms, Forms):
+            raise TypeError(f"effect module {mod.__name__}: FORMS must be a Forms(...), got {type(forms).__name__}")
+        _FORMS[eff.name] = forms
     found.sort(key=lambda e: e.rank)
     ranks = [e.rank for e in found]
     if len(set(ranks)) != len(ranks):
@@ -62,6 +70,12 @@ def get(name: str) -> Effect:
         return _catalogue()[name]
     except KeyError:
         raise KeyError(f"unknown effect {name!r}; known: {', '.join(_catalogue())}") from None
+
+
+def forms(name: str) -> Forms | None:
+    """The regressor forms an effect module holds (``FORMS``; a linear-route effect), or None."""
+    get(name)
+    return _FORMS.get(name)
 
 
 def known(name: str) -> bool:

@@ -24,6 +24,8 @@ import numpy as np
 from ... import effects, frames, kernel
 from ..effects import Effect, Route, Story, registry
 from ..effects.backlash import BACKLASH_EXPERIMENT
+from ..effects.forms import Forms, Single, Variant, v_single, params_generic
+from ..effects.forms import elec as _elec, flat as _flat, mech as _mech, sd as _sd, smooth_sign as _smooth_sign
 
 #: frame factors a torque-constant error is compared with (fitted K / nominal K): every ratio a K_t read in one
 #: frame and entered as another produces, drives on delta motors included (:func:`frames.torque_constant_frame_factors`)
@@ -38,25 +40,6 @@ def match_frame_factor(ratio: float, sigma: float) -> str:
         if err <= max(0.02 * f, 2.0 * sigma) and err < best_err:
             best, best_err = name, err
     return best
-
-
-@dataclass
-class Variant:
-    """One concrete form of a candidate: its column keys, builders and fixed hyper-parameters."""
-
-    effect: str
-    label: str
-    columns: dict[str, Callable]                  #: key -> builder(ctx) -> {eq: raw array}
-    hyper: dict[str, Any] = field(default_factory=dict)
-    #: continuous hyper-parameter refined in the final fit: name -> (value, lo, hi, rebuild(ctx, value) -> columns)
-    nonlinear: dict[str, tuple] = field(default_factory=dict)
-    additive: bool = False                        #: other variants of the same effect may join later
-    #: columns that depend on their own coefficient (fixed-point): (ctx, coef of the first key) -> {key: builder}
-    iterate: Callable | None = None
-
-    @property
-    def keys(self) -> list[str]:
-        return list(self.columns)
 
 
 @dataclass
@@ -80,19 +63,7 @@ class Candidate:
     record: Effect | None = None
 
 
-def _smooth_sign(x, eps):
-    return np.tanh(x / eps) if eps > 0 else np.sign(x)
-
-
 # ---------------------------------------------------------------------------------------- builders
-
-def _mech(f):
-    return lambda ctx: {"mechanical": f(ctx)}
-
-
-def _elec(f):
-    return lambda ctx: {"electrical": f(ctx)}
-
 
 def _fric_cols(ctx, omega_s):
     return effects.friction_basis(ctx.sig["omega_s"], omega_s, ctx.omega_eps)
@@ -525,18 +496,6 @@ def excite_dead_time(ctx):
 
 # ---------------------------------------------------------------------------------------- variants
 
-def v_single(effect, cols, label="", **kw):
-    return lambda ctx, loc: [Variant(effect, label or effect, cols, **kw)]
-
-
-@dataclass(frozen=True)
-class Single:
-    """A form table entry (:func:`_forms`): the effect's one form, these columns (made into :func:`v_single` of
-    the effect's own name by :func:`library`)."""
-
-    columns: dict[str, Callable]
-
-
 def v_stribeck(ctx, loc):
     w = np.abs(ctx.dsig("omega_s"))
     moving = w[w > 2 * ctx.omega_eps]
@@ -898,24 +857,6 @@ def v_kt(ctx, loc):
 
 # ------------------------------------------------------------------------------ parameter mapping
 
-def _sd(cov, i):
-    v = cov[i, i] if cov.size else float("nan")
-    return float(math.sqrt(v)) if v >= 0 and math.isfinite(v) else float("nan")
-
-
-def params_generic(names_units_fields):
-    """Map each column key (in order) to (name, unit, field, offset_from_nominal: callable(params)->nominal)."""
-    def f(coef, cov, keys, variant, ctx):
-        out = {}
-        for i, k in enumerate(keys):
-            name, unit, fld, nominal = names_units_fields[k] if k in names_units_fields else (k, "", None, None)
-            base = nominal(ctx.params) if nominal else 0.0
-            out[name] = {"value": base + float(coef[i]), "sd": _sd(cov, i), "unit": unit, "field": fld,
-                         "delta": float(coef[i])}
-        return out
-    return f
-
-
 def params_saturation(coef, cov, keys, variant, ctx):
     """The coefficient of the K i|i| column is the torque lost per K i|i|: the simulator's effects.kt_saturation
     (K(i) = K (1 - k |i|)); a negative value (torque rising with current) has no simulator term."""
@@ -982,10 +923,6 @@ def params_delay(coef, cov, keys, variant, ctx):
     fits = 0.0 <= d <= period
     return {"delay": {"value": d, "sd": _sd(cov, 0), "unit": "s", "field": "drive.current_loop_delay" if fits else None,
                       "delta": delta}}
-
-
-def _flat(field_name):
-    return lambda p: p.to_flat()[field_name]
 
 
 def params_friction(coef, cov, keys, variant, ctx):
@@ -1186,7 +1123,11 @@ def library() -> dict[str, Candidate]:
     forms = _forms()
     out = {}
     for e in registry.candidates():
-        variants, excited, to_params, undecided = forms.get(e.name, (None, None, None, None))
+        own = registry.forms(e.name)
+        if own is not None:
+            variants, excited, to_params, undecided = own.variants, own.excited, own.to_params, own.undecided_why
+        else:
+            variants, excited, to_params, undecided = forms.get(e.name, (None, None, None, None))
         if isinstance(variants, Single):
             variants = v_single(e.name, variants.columns)
         out[e.name] = Candidate(e.name, e.equations, e.needs, e.description, e.simulated, dict(e.confusable),
