@@ -192,6 +192,21 @@ class GearParams:
                            "recording's position channel) report: motor (the rotor encoder, divided by "
                            "gear_ratio) or load (an encoder behind the transmission); the same when rigid",
                            choices=("motor", "load"))
+    output_motion: str = _p("unspecified", "", "how the output moves: rotary (a hinge or a wheel: the output "
+                            "angle in rad, a gravity load is a sinusoid of it), linear (a slide driven through a "
+                            "screw, belt or rack: the output coordinate in m, gear_ratio in rad/m (motor angle per "
+                            "metre of travel), the load.* torques are forces [N], load.spring_stiffness N/m; no "
+                            "gravity sinusoid: an incline's weight is load.load_torque) or unspecified (the "
+                            "diagnosis then offers a gravity sinusoid only where the output angle spans enough "
+                            "of a period to tell it from a constant)", choices=("unspecified", "rotary", "linear"))
+
+    def output_unit(self, unit: str) -> str:
+        """The unit of an output-side quantity given in the rotary unit ``unit`` (``N*m`` -> ``N`` on a linear
+        axis, ``N*m/rad`` -> ``N/m``, ``rad`` -> ``m``); unchanged for a rotary or unspecified output."""
+        if self.output_motion != "linear":
+            return unit
+        return {"N*m": "N", "N*m/rad": "N/m", "rad": "m", "rad/s": "m/s", "N*m*s/rad": "N*s/m",
+                "kg*m^2": "kg"}.get(unit, unit)
 
 
 @dataclass(frozen=True)

@@ -32,10 +32,8 @@ import numpy as np
 
 from ...params import keep_controller_of
 from ..frame import simulate
+from ..frame.combination import COLLINEAR, collinear
 from ..frame.least_squares import ols
-
-#: |correlation| of two fitted core estimates beyond which they are reported as their identifiable combination
-COLLINEAR = 0.99
 
 #: the parameter-file fields of the core values the voltage equation fits, and their symbols in messages
 FIELDS = {"phase_resistance": "motor.phase_resistance", "q_inductance": "motor.q_inductance",
@@ -71,11 +69,6 @@ def _fit(ctx):
     return names, coef, cov, {k: X[:, i] for i, k in enumerate(names)}, nominal, math.sqrt(s2)
 
 
-def _correlation(cov, i: int, j: int) -> float:
-    d = cov[i, i] * cov[j, j]
-    return float(cov[i, j] / math.sqrt(d)) if d > 0 and math.isfinite(d) else float("nan")
-
-
 def check(ctx, limit: float = 0.15, *, starts: list[int] | None = None, window_s: float = 0.1,
           simulation_gate: bool = True, z: float = 2.0, reference=None) -> dict[str, Any] | None:
     """None when the voltage equation is not available or the core agrees; else ``{"far_off": [...] (empty when
@@ -103,22 +96,13 @@ def check(ctx, limit: float = 0.15, *, starts: list[int] | None = None, window_s
     # pairs the data cannot separate: reported as the combination it pins, v ~ x_p + a x_q along the pair's
     # common direction (a = <x_q, x_p> / <x_p, x_p> in the nominal units of q per unit of p's column)
     combos, in_combo = [], set()
-    for ii, p in enumerate(checked):
-        for q in checked[ii + 1:]:
-            rho = _correlation(cov, idx[p], idx[q])
-            if not (abs(rho) > COLLINEAR) or p in in_combo or q in in_combo:
-                continue
-            xp, xq = cols[p], cols[q]
-            a = float(xq @ xp / max(xp @ xp, 1e-300))        # x_q ~ a x_p over the recording
-            w = np.array([1.0, a])
-            sub = cov[np.ix_([idx[p], idx[q]], [idx[p], idx[q]])]
-            value = identified_all[p] + a * identified_all[q]
-            nom = nominal_all[p] + a * nominal_all[q]
-            combos.append({"parameters": [p, q], "correlation": rho, "a": a, "value": value,
-                           "sd": float(math.sqrt(max(float(w @ sub @ w), 0.0))), "nominal": nom,
-                           "ratio": value / nom if nom else float("nan"),
-                           "far_off": bool(nom and abs(value / nom - 1.0) > limit)})
-            in_combo |= {p, q}
+    for c in collinear(names, coef, cov, cols, among=checked):
+        p, q = c.parameters
+        nom = nominal_all[p] + c.a * nominal_all[q]
+        combos.append({"parameters": [p, q], "correlation": c.correlation, "a": c.a, "value": c.value,
+                       "sd": c.sd, "nominal": nom, "ratio": c.value / nom if nom else float("nan"),
+                       "far_off": bool(nom and abs(c.value / nom - 1.0) > limit)})
+        in_combo |= {p, q}
     far_single = [k for k in checked if k not in in_combo and k in ratio and abs(ratio[k] - 1.0) > limit]
     far_combo = [c for c in combos if c["far_off"]]
     n_far = len(far_single) + 2 * len(far_combo)          # a combination concerns two core values

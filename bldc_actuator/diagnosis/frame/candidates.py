@@ -105,15 +105,6 @@ def col_harmonic(order, k, which, current_weighted=False):
     return build
 
 
-def col_load(kind):
-    def build(ctx):
-        N = ctx.params.gear.gear_ratio
-        th_out = ctx.sig["theta"] / N
-        f = {"sin": np.sin(th_out), "cos": np.cos(th_out), "lin": th_out, "const": np.ones_like(th_out)}[kind]
-        return {"mechanical": f / N}
-    return build
-
-
 def col_kt(equations, kappa: float = 1.0):
     """Torque-constant scale κ = K_true/K (coefficient κ - 1). Mechanical (current units): i = P/(κK), so
     the column is -P/(κ̂K) at the current estimate κ̂ (iterated to a fixed point); electrical: K ω."""
@@ -416,15 +407,6 @@ def excite_angle(order):
         span = float(np.nanmax(th) - np.nanmin(th)) * o / (2 * math.pi)
         return None if span >= 2.0 else f"needs the rotor to sweep at least two periods of order {o}"
     return check
-
-
-def excite_load(ctx):
-    if float(ctx.sig["theta_known"]) <= 0:
-        return "needs the rotor angle (position channel)"
-    N = ctx.params.gear.gear_ratio
-    th = ctx.dsig("theta") / N
-    span = float(np.nanmax(th) - np.nanmin(th))
-    return None if span >= 0.5 else f"needs output motion over a larger angle (swept {span:.2f} rad)"
 
 
 def excite_inertia(ctx):
@@ -826,18 +808,6 @@ def v_eripple(ctx, loc):
     return out
 
 
-def v_load(ctx, loc):
-    cols = {"load_sin": col_load("sin"), "load_cos": col_load("cos"), "load_const": col_load("const")}
-    out = [Variant("position_dependent_load", "gravity-like sin/cos of the output angle + constant", dict(cols))]
-    N = ctx.params.gear.gear_ratio
-    th = ctx.dsig("theta") / N
-    if float(np.nanmax(th) - np.nanmin(th)) < 4 * math.pi:
-        c2 = dict(cols)
-        c2["load_lin"] = col_load("lin")
-        out.append(Variant("position_dependent_load", "gravity + spring + constant", c2))
-    return out
-
-
 def _kt_iterate(key, equations):
     return lambda ctx, coef: {key: col_kt(equations, max(0.05, 1.0 + coef))}
 
@@ -970,33 +940,6 @@ def params_eripple(coef, cov, keys, variant, ctx):
             f"_{kind}_sin": {"value": float(coef[1]), "sd": _sd(cov, 1), "unit": unit, "field": None}}
 
 
-def params_load(coef, cov, keys, variant, ctx):
-    ld = ctx.params.load
-    c = dict(zip(keys, coef))
-    # nominal gravity as sin/cos components: τ_g sin(θ + φ) = τ_g cos φ sin θ + τ_g sin φ cos θ
-    a_s = ld.gravity_torque * math.cos(ld.gravity_phase) + c.get("load_sin", 0.0)
-    a_c = ld.gravity_torque * math.sin(ld.gravity_phase) + c.get("load_cos", 0.0)
-    g = math.hypot(a_s, a_c)
-    phi = math.atan2(a_c, a_s)
-    i_s, i_c = keys.index("load_sin"), keys.index("load_cos")
-    sd_g = math.sqrt(max(0.0, (a_s ** 2 * cov[i_s, i_s] + a_c ** 2 * cov[i_c, i_c] + 2 * a_s * a_c * cov[i_s, i_c])
-                         / max(g * g, 1e-300)))
-    sd_phi = math.sqrt(max(0.0, (a_c ** 2 * cov[i_s, i_s] + a_s ** 2 * cov[i_c, i_c] - 2 * a_s * a_c * cov[i_s, i_c])
-                           / max(g ** 4, 1e-300)))
-    out = {"gravity_torque": {"value": g, "sd": sd_g, "unit": "N*m", "field": "load.gravity_torque"},
-           "gravity_phase": {"value": phi, "sd": sd_phi, "unit": "rad", "field": "load.gravity_phase"}}
-    k0 = keys.index("load_const")
-    const = ld.load_torque + c["load_const"]
-    if "load_lin" in c:
-        k = ld.spring_stiffness + c["load_lin"]
-        kl = keys.index("load_lin")
-        out["spring_stiffness"] = {"value": k, "sd": _sd(cov, kl), "unit": "N*m/rad", "field": "load.spring_stiffness"}
-        # spring zero kept; its constant part moves into load_torque
-        const = const + ld.spring_stiffness * ld.spring_zero - k * ld.spring_zero
-    out["load_torque"] = {"value": const, "sd": _sd(cov, k0), "unit": "N*m", "field": "load.load_torque"}
-    return out
-
-
 def params_kt(coef, cov, keys, variant, ctx):
     K0 = ctx.params.motor.torque_constant_q
     ratio = 1.0 + float(coef[0])
@@ -1093,7 +1036,6 @@ def _forms() -> dict[str, tuple]:
                                                       _flat("motor.viscous_damping"))}), None),
         "cogging_torque": (v_cogging, excite_angle(lambda p: 2 * p.motor.pole_pairs), params_cogging, None),
         "electrical_angle_ripple": (v_eripple, excite_angle(lambda p: p.motor.pole_pairs), params_eripple, None),
-        "position_dependent_load": (v_load, excite_load, params_load, None),
         "torque_constant_error": (v_kt, None, params_kt, None),
         "inertia_error": (Single({"inertia": col_inertia}), excite_inertia,
                           params_generic({"inertia": ("rotor_inertia", "kg*m^2", "motor.rotor_inertia",
@@ -1288,10 +1230,19 @@ def implausible(cand: Candidate, coef, cov, keys, variant: Variant, ctx) -> str 
         if v is not None:
             checks.append((lo * nominal <= v <= hi * nominal,
                            f"{name} {v:.3g} outside [{lo:g}, {hi:g}] x nominal {nominal:.3g}"))
-    for name in ("viscous_damping", "coulomb_friction", "stribeck_friction", "dead_time_voltage"):
+    non_negative = ("viscous_damping", "coulomb_friction", "stribeck_friction", "dead_time_voltage")
+    for name in non_negative:
         v, sd = val(name)
         if v is not None and isinstance(v, float):
             checks.append((v + 3.0 * sd >= 0.0, f"{name} {v:.3g} < 0"))
+    c, c_sd = val(non_negative[1])
+    a, a_sd = val("friction_asymmetry")
+    if isinstance(c, float) and isinstance(a, float):
+        # dry friction of each direction, c + a (positive motion) and c - a (negative): friction opposes motion in
+        # both; a negative one is a constant force driving the axis (it needs a holding current at standstill)
+        checks.append((c - abs(a) + 3.0 * math.hypot(c_sd, a_sd) >= 0.0,
+                       f"dry friction {c - abs(a):.3g} N*m < 0 in one direction (coulomb {c:.3g}, asymmetry "
+                       f"{a:.3g}): a constant force, not friction"))
     v, sd = val("copper_temperature_coefficient")
     if v is not None:
         checks.append((-0.001 <= v <= 0.01, f"copper coefficient {v:.3g}/K outside [-0.001, 0.01]"))

@@ -15,6 +15,7 @@ import numpy as np
 from ... import frames
 from ...params import SPECS, from_flat, keep_controller_of, outside_usual_range
 from .candidates import Candidate
+from .combination import Combination, collinear
 from ..effects import WriteBack, registry
 from .equation_error import Context, Fit
 from .selection import SelectionResult, fit_model
@@ -30,6 +31,9 @@ class FinalFit:
     cov: np.ndarray
     nonlinear: dict[str, dict[str, float]] = field(default_factory=dict)   #: effect -> {name: value, name_sd: sd}
     correlations: list[dict[str, Any]] = field(default_factory=list)
+    #: pairs of accepted columns whose estimates correlate beyond combination.COLLINEAR (column keys, the
+    #: coefficients' combination): reported and written back as their combination (:func:`effect_parameters`)
+    combinations: list[Combination] = field(default_factory=list)
 
 
 def _stacked(ctx: Context, cols, keys, weights):
@@ -117,19 +121,95 @@ def final_fit(ctx: Context, sel: SelectionResult) -> FinalFit:
                 c = cov[i, j] / (sd[i] * sd[j])
                 if abs(c) > 0.9:
                     corr.append({"a": keys[i], "b": keys[j], "correlation": round(float(c), 3)})
-    return FinalFit(fit, keys, fit.beta, cov, nl_info, corr)
+    accepted_keys = [k for a in sel.accepted for k in a.added]
+    combos = []
+    if len(accepted_keys) >= 2:
+        X, _ = _stacked(ctx, cols, keys, weights)
+        combos = collinear(keys, fit.beta, cov, X, among=accepted_keys)
+    return FinalFit(fit, keys, fit.beta, cov, nl_info, corr, combos)
 
 
 # -- parameter mapping ------------------------------------------------------------------------------
 
+def _combined(ff: FinalFit) -> tuple[np.ndarray, np.ndarray]:
+    """The final fit's coefficients and covariance with each not-separable pair written as its combination:
+    the first column carries ``c = b_p + a b_q`` (its variance the combination's), the second its nominal (no
+    change: the data did not determine it)."""
+    beta, cov = np.array(ff.beta, float), np.array(ff.cov, float)
+    if not ff.combinations:
+        return beta, cov
+    idx = {k: i for i, k in enumerate(ff.keys)}
+    T = np.eye(len(beta))
+    for c in ff.combinations:
+        p, q = idx[c.parameters[0]], idx[c.parameters[1]]
+        T[p, q] = c.a
+        T[q, q] = 0.0
+    return T @ beta, T @ cov @ T.T
+
+
+def _names_of(cand: Candidate, coef, cov, keys, variant, ctx, key: str) -> list[str]:
+    """The parameters of one effect that its column ``key`` moves (a probe of its mapping)."""
+    j = keys.index(key)
+    base = cand.to_params(coef, cov, keys, variant, ctx)
+    step = np.array(coef, float)
+    step[j] += max(abs(step[j]), 1e-6)
+    moved = cand.to_params(step, cov, keys, variant, ctx)
+    return [n for n, v in base.items() if not n.startswith("_") and isinstance(v.get("value"), (int, float))
+            and n in moved and moved[n].get("value") != v.get("value")]
+
+
+def combinations_report(ctx: Context, sel: SelectionResult, ff: FinalFit, lib: dict[str, Candidate],
+                        pars: dict[str, dict]) -> list[dict[str, Any]]:
+    """The not-separable pairs of the final fit in the report's words: which effects' parameters they combine,
+    the combination's value and sd in the first parameter's units, and what was written back."""
+    if not ff.combinations:
+        return []
+    owner = {k: a for a in sel.accepted for k in a.added}
+    beta, cov = _combined(ff)
+    idx = {k: i for i, k in enumerate(ff.keys)}
+    out = []
+    for c in ff.combinations:
+        kp, kq = c.parameters
+        ap, aq = owner[kp], owner[kq]
+        names = []
+        for a, k in ((ap, kp), (aq, kq)):
+            ii = [idx[x] for x in a.added]
+            found = _names_of(lib[a.effect], beta[ii], cov[np.ix_(ii, ii)], a.added, a.variant, ctx, k)
+            names.append((a.effect, found[0] if found else k))
+        (ep, np_), (eq, nq) = names
+        vp = pars.get(ep, {}).get(np_, {})
+        vq = pars.get(eq, {}).get(nq, {})
+        value = (vp.get("value", float("nan")) + c.a * vq.get("value", float("nan")))
+        sym = {"p": f"{ep}.{np_}", "q": f"{eq}.{nq}"}
+        rec = {"parameters": [sym["p"], sym["q"]], "columns": [kp, kq], "correlation": c.correlation, "a": c.a,
+               "value": value, "sd": vp.get("sd", c.sd), "unit": vp.get("unit", ""),
+               "written_back": f"{sym['q']} kept at its nominal value {vq.get('value', float('nan')):.4g}; "
+                               f"{sym['p']} = {vp.get('value', float('nan')):.4g} carries the combination (the "
+                               f"model simulates the recording as the fit does; the split is not determined)"}
+        rec["message"] = (f"{sym['p']} and {sym['q']} are not separable with this data (their fitted estimates "
+                          f"correlate {c.correlation:+.4f}): the data pin {sym['p']} + {c.a:.4g}·{sym['q']} = "
+                          f"{value:.4g} ± {rec['sd']:.2g} {rec['unit']}".rstrip() + f"; {rec['written_back']}")
+        for e, n, other in ((ep, np_, sym["q"]), (eq, nq, sym["p"])):
+            if n in pars.get(e, {}):
+                pars[e][n]["combined_with"] = other
+        if nq in pars.get(eq, {}):
+            pars[eq][nq]["held_at_nominal"] = True
+            pars[eq][nq]["sd"] = float("nan")
+        out.append(rec)
+    return out
+
+
 def effect_parameters(ctx: Context, sel: SelectionResult, ff: FinalFit, lib: dict[str, Candidate]):
-    """Per accepted effect: parameters (value, sd, unit, field) in natural units."""
+    """Per accepted effect: parameters (value, sd, unit, field) in natural units. A pair of columns the data
+    cannot separate (``ff.combinations``) is mapped as its combination: the first carries it, the second keeps
+    its nominal value (:func:`_combined`)."""
     out = {}
     idx = {k: i for i, k in enumerate(ff.keys)}
+    beta_c, cov_c = _combined(ff)
     for a in sel.accepted:
         ii = [idx[k] for k in a.added]
-        coef = ff.beta[ii]
-        cov = ff.cov[np.ix_(ii, ii)]
+        coef = beta_c[ii]
+        cov = cov_c[np.ix_(ii, ii)]
         cand = lib[a.effect]
         # the refined continuous hyper-parameters (final_fit) are what the parameters derive from
         refined = {n: v for n, v in ff.nonlinear.get(a.effect, {}).items() if n in a.variant.hyper}
