@@ -34,6 +34,8 @@ class FinalFit:
     #: pairs of accepted columns whose estimates correlate beyond combination.COLLINEAR (column keys, the
     #: coefficients' combination): reported and written back as their combination (:func:`effect_parameters`)
     combinations: list[Combination] = field(default_factory=list)
+    #: the same in the report's words (:func:`combinations_report`, filled by :func:`effect_parameters`)
+    combined: list[dict[str, Any]] = field(default_factory=list)
 
 
 def _stacked(ctx: Context, cols, keys, weights):
@@ -227,6 +229,7 @@ def effect_parameters(ctx: Context, sel: SelectionResult, ff: FinalFit, lib: dic
                 "unit": "rad/s" if name == "omega_s" else "", "field": fld}
         out.setdefault(a.effect, {}).update(pars)
     _rescale_by_torque_constant(out, lib)
+    ff.combined = combinations_report(ctx, sel, ff, lib, out)
     return out
 
 

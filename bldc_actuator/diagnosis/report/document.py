@@ -61,6 +61,8 @@ class DiagnosisReport:
     locate: dict = field(default_factory=dict)
     rounds: list = field(default_factory=list)
     correlations: list = field(default_factory=list)
+    #: pairs of fitted parameters the data cannot separate, reported as their combination (writeback)
+    combinations: list = field(default_factory=list)
     not_simulated: list = field(default_factory=list)
     timing: dict = field(default_factory=dict)
     setup: dict = field(default_factory=dict)
@@ -121,6 +123,7 @@ class DiagnosisReport:
              "data_issues": self.data_issues, "not_checkable": self.not_checkable, "aliases": self.aliases,
              "not_simulated": self.not_simulated, "compare": self.compare, "locate": loc,
              "selection_rounds": self.rounds, "parameter_correlations": self.correlations,
+             "parameter_combinations": self.combinations,
              "residual_structure": self.residual_structure,
              "setup": self.setup, "timing": self.timing, "notes": self.notes}
         return _clean(d)
@@ -209,6 +212,8 @@ def _markdown(r: DiagnosisReport, images: dict[str, str]) -> str:
             if f.get("correlations"):
                 L += ["", "Strongly correlated parameters: " + ", ".join(
                     f"{c['a']}~{c['b']} ({c['correlation']:+.2f})" for c in f["correlations"])]
+            for c in f.get("combinations", []):
+                L += ["", f"Not separable with this data: {c['message']}."]
             L.append("")
     elif r.verdict_kind == NOTHING_MISSING:
         L += ["## Nothing missing", "",

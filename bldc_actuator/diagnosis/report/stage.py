@@ -114,6 +114,7 @@ def _finding(ctx, sel, ff, pars, lib, located, not_sim, a) -> dict:
         "delta_bic": a.dbic,
         "round": a.round,
         "correlations": [c for c in ff.correlations if c["a"] in a.added or c["b"] in a.added],
+        "combinations": [c for c in ff.combined if set(c["columns"]) & set(a.added)],
     }
     if registry.get(a.effect).torque_scale:
         finding["frame_factor"] = p.get("frame_factor", {}).get("value", "none")
@@ -234,7 +235,8 @@ def run(signals, params, s: Search, j: Judgement, m: Model, options, say: Say, t
         residual_structure=[x.to_dict() for x in structures],
         notes=_data_notes(signals) + ctx.notes + m.notes + ([base["message"]] if base else []), compare=compare,
         locate=s.located,
-        rounds=sel.rounds, correlations=j.final.correlations, not_simulated=m.not_simulated, timing=timing,
+        rounds=sel.rounds, correlations=j.final.correlations, combinations=j.final.combined,
+        not_simulated=m.not_simulated, timing=timing,
         updated_params=m.params, nominal_params=params,
         setup={"rate_hz": ctx.fs, "cutoff_hz": ctx.dec.fc, "decimation": ctx.dec.q, "samples": int(len(ctx.t)),
                "decimated_samples": int(len(ctx.dec)), "holdout": "separate recording" if options.holdout_signals
