@@ -6,6 +6,8 @@ and plots. :func:`run` is the entry point; nothing is decided here.
 
 from __future__ import annotations
 
+import dataclasses
+
 import time
 
 import numpy as np
@@ -125,20 +127,56 @@ def _finding(ctx, sel, ff, pars, lib, located, not_sim, a) -> dict:
     return finding
 
 
-def _aliases(sel, lib) -> list[dict]:
+def _aliases(sel, lib, ctx=None, updated=None) -> list[dict]:
     out = []
     for a in sel.aliases:
         A, B = a["effects"]
         exp = (a.get("experiment") or lib[A].confusable.get(B) or lib[B].confusable.get(A)
                or "record data that excites them differently")
-        out.append({"effects": [A, B], "chosen": a["chosen"], "correlation": a["correlation"],
-                    "message": f"cannot tell {A} from {B} with this data (their fitted contributions "
-                               f"correlate {a['correlation']:.2f}); "
-                               + (f"{a['chosen']} was kept" if a["chosen"] else
-                                  "neither was kept: together they fit implausible values")
-                               + (f" ({a['decided_by']})" if a.get("decided_by") else ""),
-                    "experiment": exp})
+        rec = {"effects": [A, B], "chosen": a["chosen"], "correlation": a["correlation"],
+               "message": f"cannot tell {A} from {B} with this data (their fitted contributions "
+                          f"correlate {a['correlation']:.2f}); "
+                          + (f"{a['chosen']} was kept" if a["chosen"] else
+                             "neither was kept: together they fit implausible values")
+                          + (f" ({a['decided_by']})" if a.get("decided_by") else ""),
+               "experiment": exp}
+        pred = _transmission_predictions(ctx, updated, lib, A, B, a.get("chosen"))
+        if pred is not None:
+            rec["predictions"], text = pred
+            rec["experiment"] = f"{exp}. What each would show: {text}"
+        out.append(rec)
     return out
+
+
+def _transmission_predictions(ctx, updated, lib, A, B, chosen):
+    """An alias of a hidden form behind the transmission spring the finding wrote (``hides_behind``: a dead zone
+    seen from the rotor alone acts as a softer spring): each candidate fitted to the recording, and what it
+    predicts for the deciding experiment (:func:`..frame.transmission.spring_or_dead_zone`)."""
+    if ctx is None or updated is None or chosen not in (A, B):
+        return None
+    other = B if chosen == A else A
+    if chosen not in (lib[other].hides_behind or ()) or not updated.gear.transmission_stiffness > 0.0:
+        return None
+    from ..frame import transmission
+
+    try:
+        both = transmission.spring_or_dead_zone(ctx, updated)
+    except (ValueError, FloatingPointError):
+        return None
+    if both is None:
+        return None
+    spring, dz = both
+    mrad = 1e3
+    preds = {chosen: dataclasses.asdict(spring), other: dataclasses.asdict(dz)}
+    text = (f"{chosen} (the fitted spring, {spring.stiffness:.4g} N*m/rad): a load encoder over this motion reads a "
+            f"deflection of {mrad * spring.deflection_rms:.3g} mrad RMS ({mrad * spring.deflection_p2p:.3g} peak to "
+            f"peak), a slow low-torque reversal shows no lost motion; {other} (a dead zone of "
+            f"{mrad * dz.backlash:.3g} mrad behind a spring of {dz.stiffness:.4g} N*m/rad, fitted to follow the "
+            f"recorded rotor as the spring does: its load angle differs by {mrad * dz.load_angle_rms_difference:.2g} "
+            f"mrad RMS): a deflection of {mrad * dz.deflection_rms:.3g} mrad RMS "
+            f"({mrad * dz.deflection_p2p:.3g} peak to peak), a lost motion of {mrad * dz.lost_motion:.3g} mrad at the "
+            f"reversal (output side; simulated by the load equation driven by the recorded rotor)")
+    return preds, text
 
 
 def run(signals, params, s: Search, j: Judgement, m: Model, options, say: Say, t_start: float) -> DiagnosisReport:
@@ -231,7 +269,7 @@ def run(signals, params, s: Search, j: Judgement, m: Model, options, say: Say, t
     report = DiagnosisReport(
         channels=sorted(ctx.have), findings=findings, windows=s.windows, rejected=rejected,
         data_issues=s.data_issues, not_checkable=not_checkable,
-        aliases=_aliases(sel, lib), verdict_record=verdict_rec,
+        aliases=_aliases(sel, lib, ctx, m.params), verdict_record=verdict_rec,
         residual_structure=[x.to_dict() for x in structures],
         notes=_data_notes(signals) + ctx.notes + m.notes + ([base["message"]] if base else []), compare=compare,
         locate=s.located,
