@@ -133,3 +133,26 @@ def test_b_a_hinge_with_gravity_over_90_degrees_gets_its_gravity_named():
     assert abs(p["gravity_torque"] - TAU_G) <= max(3 * u["gravity_torque"], 0.02 * TAU_G), load
     assert abs(p["gravity_phase"] - PHI) <= max(3 * u["gravity_phase"], 0.02), load
     assert load["units"]["gravity_torque"] == "N*m"
+
+
+def test_a_force_below_the_dry_friction_and_a_friction_asymmetry_are_reported_as_aliases():
+    """The same axis with a Coulomb friction (0.012 N*m) above the force (0.005 N*m at the motor): while moving a
+    constant force and a friction asymmetry are one column (|sign ω| = 1), and standing still both hold the same
+    band; the data cannot separate them, and the report says so and which experiment does."""
+    nom = _nominal("linear")
+    truth = nom.replace(**{"effects.coulomb_friction": 0.012, "motor.viscous_damping": VISCOUS,
+                           "load.load_torque": FORCE})
+    tr = closed_loop_recording(truth, nom, _stroke(0.0), duration=24.0, seed=1)
+    ho = closed_loop_recording(truth, nom, _stroke(1.0), duration=16.0, seed=2)
+    rep = pipeline.diagnose(tr, nom, options=pipeline.DiagnoseOptions(holdout_signals=ho, progress=False,
+                                                                      effects=EFFECTS))
+    named = _named(rep)
+    assert "viscous_friction" in named
+    al = [a for a in rep.aliases if set(a["effects"]) == {"asymmetric_friction", LOAD}]
+    assert al, (rep.aliases, list(named))
+    assert "same equation" in al[0]["message"] and "holding current at standstill" in al[0]["experiment"]
+    # whichever form was kept, the constant torque while moving is the force: the asymmetry, or the load
+    if "asymmetric_friction" in named:
+        a = named["asymmetric_friction"]
+        got, sd = a["parameters"]["friction_asymmetry"], a["uncertainty"]["friction_asymmetry"]
+        assert abs(got - FORCE / N_SCREW) <= 3 * sd + 0.02 * abs(FORCE / N_SCREW), a

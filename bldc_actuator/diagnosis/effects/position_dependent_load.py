@@ -35,9 +35,12 @@ EFFECT = Effect(
     description="a load at the output: a constant force or torque, a spring, or a gravity-like sinusoid of the "
                 "output angle",
     equations=("mechanical",), needs=("current", "position"), simulated=True,
-    confusable={"asymmetric_friction": "hold still with the load on (a constant force needs a holding current at "
-                "standstill, friction none), at several angles (a gravity load changes with the angle), or move "
-                "in both directions over the same angles: a load depends on position, friction on direction"},
+    confusable={"asymmetric_friction": "while the axis moves a constant load and a friction asymmetry are the same "
+                "equation (a constant torque whichever the direction), and standing still too while the load is "
+                "below the dry friction; a load above it needs a holding current at standstill and drifts with the "
+                "current off, friction never does. Below it: change the load (unload the axis or turn it over: a "
+                "force reverses or vanishes, friction does not), measure the force, or, for a gravity load, hold "
+                "still at several angles"},
     params=(Param("gravity_torque", "N*m", "load.gravity_torque"), Param("gravity_phase", "rad", "load.gravity_phase"),
             Param("spring_stiffness", "N*m/rad", "load.spring_stiffness"),
             Param("load_torque", "N*m", "load.load_torque")),

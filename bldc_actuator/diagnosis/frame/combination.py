@@ -75,3 +75,47 @@ def collinear(names: list[str], values, cov: np.ndarray, columns, *, limit: floa
                                float(math.sqrt(max(float(w @ sub @ w), 0.0)))))
         used |= {p, q}
     return out
+
+
+def same_equation(ctx, cols, keys_x: list[str], keys_y: list[str]) -> float | None:
+    """Whether every column of ``keys_y`` (those not in ``keys_x``) lies in the span of the columns ``keys_x`` on
+    the training rows the fit uses: the smallest uncentred R² when each is beyond :data:`COLLINEAR` squared, else
+    None. A constant load while moving and a friction asymmetry (``|sign ω|``) are one column wherever the rotor
+    is not stuck (stuck samples leave the equation: friction is anything up to breakaway there). ``ctx``: the
+    equation-error context (its ``blocks`` and ``holdout_dec``); ``cols``: key -> {equation: decimated column}."""
+    extra = [k for k in keys_y if k not in keys_x]
+    if not extra or not keys_x:
+        return None
+    ho = ctx.holdout_dec
+    Xs, Ys = [], []
+    for eq, B in ctx.blocks.items():
+        rows = B.rows(ho, "train")
+        n = int(rows.sum())
+        if not n:
+            continue
+
+        def take(k):
+            c = cols[k].get(eq)
+            return c[rows] if c is not None else np.zeros(n)
+
+        Xs.append(np.column_stack([take(k) for k in keys_x]))
+        Ys.append(np.column_stack([take(k) for k in extra]))
+    if not Xs:
+        return None
+    X, Y = np.vstack(Xs), np.vstack(Ys)
+    good = np.all(np.isfinite(X), axis=1) & np.all(np.isfinite(Y), axis=1)
+    X, Y = X[good], Y[good]
+    if len(X) < 10:
+        return None
+    r2 = []
+    for j in range(Y.shape[1]):
+        y = Y[:, j]
+        yy = float(y @ y)
+        if yy <= 0:
+            continue
+        beta, *_ = np.linalg.lstsq(X, y, rcond=None)
+        e = y - X @ beta
+        r2.append(1.0 - float(e @ e) / yy)
+    if not r2 or min(r2) <= COLLINEAR ** 2:
+        return None
+    return float(min(r2))

@@ -27,6 +27,7 @@ import numpy as np
 from scipy import stats
 
 from .candidates import THERMAL, Candidate, Variant, implausible
+from .combination import same_equation
 from ..effects import registry
 from .equation_error import Context, Fit, delta_bic, fit_columns, heldout_comparison, robust_std, touched
 
@@ -653,3 +654,50 @@ def name_unexcited(ctx: Context, sel: SelectionResult, alias: dict[str, Any]) ->
                                    f"for {y} (at the smaller effective sample count), held-out error "
                                    f"{-100 * ho['rel']:+.1f} % RMS against {x} (t = {ho['t']:.1f}); {y} was set aside "
                                    f"first ({alias['why']}), but this recording separates them"})
+
+
+def nested_aliases(ctx: Context, loc: dict, lib: dict[str, Candidate], sel: SelectionResult) -> list[dict[str, Any]]:
+    """Accepted effects X whose columns already hold a tested, not accepted, candidate Y that the catalogue calls
+    confusable with X: each of Y's own columns lies in the span of X's on every row the equation uses
+    (:func:`.combination.same_equation`). Y then adds nothing to X in the selection and is rejected as "not
+    supported", yet the data cannot say which of the two it is (a constant force and a friction asymmetry while
+    the axis moves). Y refused for implausible values is not among them: there the data decided (a friction
+    negative in one direction is a force). Plain data, the selection's alias records."""
+    out: list[dict[str, Any]] = []
+    if not sel.accepted or sel.final_fit is None:
+        return out
+    acc = {a.effect for a in sel.accepted}
+    known = {frozenset(x.get("effects", ())) for x in sel.aliases}
+    tested = {x.get("effect"): str(x.get("reason", "")) for x in sel.rejected}
+    for name, cand in lib.items():
+        if name in acc or name not in tested or "implausible" in tested[name] or cand.variants is None:
+            continue
+        for a in sel.accepted:
+            other = lib[a.effect]
+            if frozenset((a.effect, name)) in known or not (name in other.confusable or a.effect in cand.confusable):
+                continue
+            if not set(cand.equations) & set(other.equations):
+                continue
+            try:
+                variants = cand.variants(ctx, loc) or []
+            except (ValueError, KeyError, IndexError, FloatingPointError):
+                continue
+            for v in variants:
+                new = [k for k in v.keys if k not in sel.final_fit.keys]
+                if not new:
+                    continue
+                cols = dict(sel.cols)
+                for k in new:
+                    cols[k] = ctx.column(k, v.columns[k])
+                r2 = same_equation(ctx, cols, a.added, new)
+                if r2 is None:
+                    continue
+                out.append({"effects": [a.effect, name], "chosen": a.effect, "correlation": math.sqrt(r2),
+                            "form": v.label, "nested": True,
+                            "decided_by": f"{name} ({v.label}) is the same equation as part of {a.effect} on these "
+                                          f"data: its columns lie in the span of {a.effect}'s, R² {r2:.5f}; the "
+                                          f"data cannot separate them",
+                            "experiment": cand.confusable.get(a.effect) or other.confusable.get(name)})
+                known.add(frozenset((a.effect, name)))
+                break
+    return out

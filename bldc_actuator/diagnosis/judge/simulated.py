@@ -33,6 +33,7 @@ from ..frame import simulate
 from ..frame import thermal as thermal_net
 
 from ..frame import writeback
+from ..frame.combination import same_equation
 from ..effects import Route, registry
 
 #: the simulated channel in which each equation's effects show (voltage-side effects: the drive's q voltage,
@@ -525,50 +526,6 @@ def parameter_spread(e0: float, plus, minus) -> float:
     return math.sqrt(var)
 
 
-def same_equation(ctx, cols, keys_x: list[str], keys_y: list[str]) -> str | None:
-    """Whether every column of ``keys_y`` lies in the span of the columns ``keys_x`` on the training rows the
-    fit uses (uncentred R² of each beyond :data:`..frame.combination.COLLINEAR` squared): a description (the
-    smallest R²) when it does, else None. A constant load while moving and a friction asymmetry (``|sign ω|``)
-    are one column wherever the rotor is not stuck (stuck samples leave the equation: friction is anything up to
-    breakaway there)."""
-    from ..frame.combination import COLLINEAR
-
-    extra = [k for k in keys_y if k not in keys_x]
-    if not extra or not keys_x:
-        return None
-    ho = ctx.holdout_dec
-    Xs, Ys = [], []
-    for eq, B in ctx.blocks.items():
-        rows = B.rows(ho, "train")
-        if not rows.any():
-            continue
-        X = np.column_stack([cols[k].get(eq, np.zeros(len(rows)))[rows] if cols[k].get(eq) is not None
-                             else np.zeros(int(rows.sum())) for k in keys_x])
-        Y = np.column_stack([cols[k].get(eq)[rows] if cols[k].get(eq) is not None else np.zeros(int(rows.sum()))
-                             for k in extra])
-        Xs.append(X)
-        Ys.append(Y)
-    if not Xs:
-        return None
-    X, Y = np.vstack(Xs), np.vstack(Ys)
-    good = np.all(np.isfinite(X), axis=1) & np.all(np.isfinite(Y), axis=1)
-    X, Y = X[good], Y[good]
-    if len(X) < 10:
-        return None
-    r2 = []
-    for j in range(Y.shape[1]):
-        y = Y[:, j]
-        yy = float(y @ y)
-        if yy <= 0:
-            continue
-        beta, *_ = np.linalg.lstsq(X, y, rcond=None)
-        e = y - X @ beta
-        r2.append(1.0 - float(e @ e) / yy)
-    if not r2 or min(r2) <= COLLINEAR ** 2:
-        return None
-    return f"{', '.join(extra)} in the span of {', '.join(keys_x)}: R² {min(r2):.5f}"
-
-
 def arbitrate_aliases(ctx, sel, reselect, lib, starts: list[int], window_s: float, z: float = 2.0,
                       progress=None):
     """Aliases decided by the simulator. Equation error chose ``chosen`` over an aliased alternative (their fitted
@@ -632,7 +589,8 @@ def arbitrate_aliases(ctx, sel, reselect, lib, starts: list[int], window_s: floa
                 worse.append(c)
         n0, n1 = len(acc[chosen].added), len(acc2[alt].added)
         parts = f"windows {z * se:.2g}, the two forms' fitted values {z * par:.2g}"
-        nested = same_equation(ctx, {**sel2.cols, **sel.cols}, acc[chosen].added, acc2[alt].added)
+        r2 = same_equation(ctx, {**sel2.cols, **sel.cols}, acc[chosen].added, acc2[alt].added)
+        nested = None if r2 is None else f"its columns in the span of {chosen}'s, R² {r2:.5f}"
         if nested is not None:
             # the alternative's columns lie in the chosen form's span on every row the equation uses: the two are
             # one model there, and any replay difference is a difference of fitted values, not of forms

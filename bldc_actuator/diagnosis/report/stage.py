@@ -21,7 +21,7 @@ from ..frame import thermal as thermal_net
 from ..frame.equation_error import ee_metrics, rms
 from .document import DiagnosisReport
 from ..results import Undecidable, decide
-from ..frame.selection import fit_model
+from ..frame.selection import fit_model, nested_aliases
 from ..records import Judgement, Model, Say, Search
 
 
@@ -127,9 +127,10 @@ def _finding(ctx, sel, ff, pars, lib, located, not_sim, a) -> dict:
     return finding
 
 
-def _aliases(sel, lib, ctx=None, updated=None) -> list[dict]:
+def _aliases(sel, lib, ctx=None, updated=None, located=None) -> list[dict]:
     out = []
-    for a in sel.aliases:
+    nested = nested_aliases(ctx, located, lib, sel) if ctx is not None and located is not None else []
+    for a in sel.aliases + nested:
         A, B = a["effects"]
         exp = (a.get("experiment") or lib[A].confusable.get(B) or lib[B].confusable.get(A)
                or "record data that excites them differently")
@@ -269,7 +270,7 @@ def run(signals, params, s: Search, j: Judgement, m: Model, options, say: Say, t
     report = DiagnosisReport(
         channels=sorted(ctx.have), findings=findings, windows=s.windows, rejected=rejected,
         data_issues=s.data_issues, not_checkable=not_checkable,
-        aliases=_aliases(sel, lib, ctx, m.params), verdict_record=verdict_rec,
+        aliases=_aliases(sel, lib, ctx, m.params, s.located), verdict_record=verdict_rec,
         residual_structure=[x.to_dict() for x in structures],
         notes=_data_notes(signals) + ctx.notes + m.notes + ([base["message"]] if base else []), compare=compare,
         locate=s.located,
