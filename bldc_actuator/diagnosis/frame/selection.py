@@ -483,6 +483,15 @@ def forward_select(ctx: Context, loc: dict, lib: dict[str, Candidate], names: li
         top = max(e.heldout["rel"] for e in passing)
         near = [e for e in passing if e.heldout["rel"] >= top - max(0.002, 0.05 * top)]
         win = min(near, key=lambda e: (len(e.added), -e.dbic))
+        if registry.get(win.effect).external_load:
+            # one equation on these data (the load's columns in the span of a passing form of the actuator's own
+            # physics: a constant force while moving is a friction asymmetry): the external load is not preferred
+            # to what it cannot be told from; the data name it where the two differ (a friction negative in one
+            # direction, a holding current beyond the friction, an angle dependence). Reported as aliases.
+            own = [e for e in passing if not registry.get(e.effect).external_load
+                   and same_equation(ctx, cols, e.added, win.added) is not None]
+            if own:
+                win = max(own, key=lambda e: e.heldout["rel"])
         say(f"round {rnd + 1}: accepted {win.effect} ({win.variant.label}); {win.reason}")
         aliases += _aliases_of(ctx, win, passing, cols, weights, gate)
         accepted.append(Accepted(win.effect, win.variant, win.added, rnd + 1, win.dbic, win.heldout))

@@ -176,7 +176,10 @@ def combinations_report(ctx: Context, sel: SelectionResult, ff: FinalFit, lib: d
         names = []
         for a, k in ((ap, kp), (aq, kq)):
             ii = [idx[x] for x in a.added]
-            found = _names_of(lib[a.effect], beta[ii], cov[np.ix_(ii, ii)], a.added, a.variant, ctx, k)
+            try:
+                found = _names_of(lib[a.effect], beta[ii], cov[np.ix_(ii, ii)], a.added, a.variant, ctx, k)
+            except (ValueError, KeyError, IndexError, TypeError, ZeroDivisionError):
+                found = []      # a mapping that cannot be probed: the column's own key names it
             names.append((a.effect, found[0] if found else k))
         (ep, np_), (eq, nq) = names
         vp = pars.get(ep, {}).get(np_, {})
