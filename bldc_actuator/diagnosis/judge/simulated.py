@@ -589,9 +589,18 @@ def arbitrate_aliases(ctx, sel, reselect, lib, starts: list[int], window_s: floa
                 worse.append(c)
         n0, n1 = len(acc[chosen].added), len(acc2[alt].added)
         parts = f"windows {z * se:.2g}, the two forms' fitted values {z * par:.2g}"
-        r2 = same_equation(ctx, {**sel2.cols, **sel.cols}, acc[chosen].added, acc2[alt].added)
+        both_cols = {**sel2.cols, **sel.cols}
+        r2 = same_equation(ctx, both_cols, acc[chosen].added, acc2[alt].added)
         nested = None if r2 is None else f"its columns in the span of {chosen}'s, R² {r2:.5f}"
-        if nested is not None:
+        r2_back = same_equation(ctx, both_cols, acc2[alt].added, acc[chosen].added)
+        if r2_back is not None and registry.get(chosen).external_load and not registry.get(alt).external_load:
+            # the external load is one equation with the actuator's own physics on these data (its columns in the
+            # span of the alternative's): not preferred to it, as in the selection (frame/selection.py)
+            swap, why = True, (f"{chosen}'s columns lie in the span of {alt}'s on these data (R² {r2_back:.5f}): "
+                               f"an external load is not preferred to the actuator's own physics it cannot be told "
+                               f"from (held-out {ch} error difference {gain:+.3g}); {alt} kept, the two reported as "
+                               f"aliases")
+        elif nested is not None:
             # the alternative's columns lie in the chosen form's span on every row the equation uses: the two are
             # one model there, and any replay difference is a difference of fitted values, not of forms
             swap, why = False, (f"{alt} is the same equation as {chosen} on these data ({nested}): the simulator "
