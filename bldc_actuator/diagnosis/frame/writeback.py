@@ -123,11 +123,14 @@ def final_fit(ctx: Context, sel: SelectionResult) -> FinalFit:
                 c = cov[i, j] / (sd[i] * sd[j])
                 if abs(c) > 0.9:
                     corr.append({"a": keys[i], "b": keys[j], "correlation": round(float(c), 3)})
-    accepted_keys = [k for a in sel.accepted for k in a.added]
+    # pairs of two accepted effects (within one effect its form's parametrisation is its own: the forms offered are
+    # the ones the recording identifies, and e.g. a spring's zero offset is well determined however it correlates)
+    owner = {k: a.effect for a in sel.accepted for k in a.added}
     combos = []
-    if len(accepted_keys) >= 2:
+    if len(set(owner.values())) >= 2:
         X, _ = _stacked(ctx, cols, keys, weights)
-        combos = collinear(keys, fit.beta, cov, X, among=accepted_keys)
+        combos = [c for c in collinear(keys, fit.beta, cov, X, among=list(owner))
+                  if owner[c.parameters[0]] != owner[c.parameters[1]]]
     return FinalFit(fit, keys, fit.beta, cov, nl_info, corr, combos)
 
 
