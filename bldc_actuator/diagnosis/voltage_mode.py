@@ -391,10 +391,12 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
     free = ["offset"]
     terms = ["k_over_r", "damping"] + (["coulomb"] if both_ways else [])
     span_out = float(np.ptp(c.th[rows])) / N if c.th is not None and len(rows) else 0.0
-    if span_out >= MIN_LOAD_SPAN:
+    if span_out >= MIN_LOAD_SPAN and params.gear.output_motion != "linear":
         terms.append("load")
     else:
         notes.append(f"a load of the output angle (gravity) is not tested: " + (
+            "gear.output_motion is linear (a slide's weight is the constant torque)"
+            if params.gear.output_motion == "linear" else
             "no angle channel" if c.th is None else f"the output angle spans {span_out:.3g} rad < {MIN_LOAD_SPAN:g}"))
     if not both_ways:
         notes.append("motion in one direction only: Coulomb friction and the constant torque are one column "
