@@ -36,9 +36,20 @@ PER_JOINT_LOAD = registry.by_field("load.gravity_torque")[0]
 
 #: always fitted on every joint (cheap, never aliased with a body's mass)
 _NUISANCE = (("coulomb", cands.col_fric_sign), ("viscous", cands.col_viscous), ("const", cands.col_load("const")))
-#: a joint's own scale terms: a torque constant scales its whole torque and a rotor inertia its acceleration, so
-#: either could take a body's torque on that one joint: they compete with the bodies in the same selection
-_JOINT_SCALES = (("kt", cands.col_kt(("mechanical",))), ("inertia", cands.col_inertia))
+
+
+def _scale_columns(ctx, qdd_s: np.ndarray, tau_raw: np.ndarray, tau_s: np.ndarray) -> dict[str, np.ndarray]:
+    """A joint's own scale terms, which could take a body's torque on that one joint and so compete with the bodies
+    in the same selection: its torque constant (the column ``-P``, :func:`..frame.candidates.col_kt`) and its rotor
+    inertia (``ω'``), both [N·m at the motor] with the acceleration of the smoothed motion: ``P`` itself holds the
+    twice-differenced encoder noise that is also in the residual, and a column sharing the residual's noise fits
+    that noise (the frame's instruments answer the same problem for its own columns)."""
+    S = ctx.sig
+    N = ctx.params.gear.gear_ratio
+    J = ctx.params.motor.rotor_inertia
+    a_s = N * qdd_s
+    P_s = S["P"] - J * (S["omega_dot"] - a_s) - (tau_raw - tau_s) / N
+    return {"kt": -P_s, "inertia": a_s}
 _LOADS = (("sin", cands.col_load("sin")), ("cos", cands.col_load("cos")))
 
 
@@ -174,9 +185,11 @@ def _smoothed(motion: JointMotion, ctx) -> tuple[np.ndarray, np.ndarray, np.ndar
 
 
 def fit_masses(contexts: dict, body: BodyModel, motion: JointMotion, *, gate: GateConfig | None = None,
-               tolerance: float = 0.05, max_relative_uncertainty: float = 0.5, max_bodies: int = 3) -> BodyDiagnosis:
+               tolerance: float = 0.05, max_relative_uncertainty: float = 0.5, max_bodies: int = 3,
+               tau: np.ndarray | None = None) -> BodyDiagnosis:
     """The body's mass errors from the joints' prepared equations (``contexts``: recorded joint ->
-    :class:`..frame.equation_error.Context` built with the nominal body's torque as its known load)."""
+    :class:`..frame.equation_error.Context` built with the nominal body's torque as its known load; ``tau``: that
+    torque, (n, k) in ``motion.joints`` order, computed when not given)."""
     gate = gate or GateConfig()
     out = BodyDiagnosis()
     parts: list[_Joint] = []
@@ -219,9 +232,12 @@ def fit_masses(contexts: dict, body: BodyModel, motion: JointMotion, *, gate: Ga
                         ["mechanical"])
         if any(np.any(c) for c in cols):
             columns[f"body:{cand.name}"] = (cand, cols)
+    tau_raw = body.torques(motion.q, motion.qd, motion.qdd) if tau is None else tau
+    tau_s = body.torques(*smooth)
     for j, p in enumerate(parts):   # each joint's own scale terms, zero on every other joint
-        for key, b in _JOINT_SCALES:
-            c = p.ctx.column(("body scale", key), b)["mechanical"]
+        k = k_of[p.name]
+        for key, col in _scale_columns(p.ctx, smooth[2][:, k], tau_raw[:, k], tau_s[:, k]).items():
+            c = p.ctx.column(("body scale", key), lambda c_, x=col: {"mechanical": x})["mechanical"]
             columns[f"{p.name}:{key}"] = (None, [c if i == j else np.zeros(len(q.y)) for i, q in enumerate(parts)])
     chosen: list[tuple[BodyMass | None, list]] = []
     taken: set[str] = set()

@@ -130,7 +130,7 @@ def diagnose_robot(signals: Mapping[str, Any], params, mjcf, *, joint_map: Mappi
     contexts = {j: ee.prepare([(loaded[j], False)], ps[j], fc=options.cutoff_hz, holdout=options.holdout,
                               voltage_timing=options.voltage_timing) for j in names}
     found = fit_masses(contexts, body, motion, gate=options.gate, tolerance=options.tolerance,
-                       max_relative_uncertainty=options.max_relative_uncertainty)
+                       max_relative_uncertainty=options.max_relative_uncertainty, tau=tau)
     reports: dict[str, DiagnosisReport] = {}
     if joints_diagnosed:
         if found.findings:
