@@ -17,6 +17,7 @@ load. Bodies are added greedily (the best first), so two wrong masses are two fi
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -296,4 +297,11 @@ def fit_masses(contexts: dict, body: BodyModel, motion: JointMotion, *, gate: Ga
         current = f
         if len(out.findings) >= max_bodies:
             break
+    if out.findings:   # every value from the final model (a term chosen later, a joint's K_t, moves an earlier mass)
+        final = _fit(parts, per_joint, [c[1] for c in chosen])
+        n_own = sum(len(per_joint[p.name]) for p in parts)
+        at = {c[0].name: n_own + i for i, c in enumerate(chosen) if c[0] is not None}
+        out.findings = [dataclasses.replace(f, delta_mass=float(final.beta[at[f.body]]),
+                                            delta_mass_sd=float(math.sqrt(max(final.cov[at[f.body], at[f.body]], 0.0))))
+                        for f in out.findings]
     return out
