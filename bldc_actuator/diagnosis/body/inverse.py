@@ -97,6 +97,20 @@ class BodyModel:
             out[i] = d.qfrc_inverse[dof]
         return out
 
+    def joint_inertia(self, q: np.ndarray, every: int = 10) -> np.ndarray:
+        """(k,) each recorded joint's own inertia in the body (the mass matrix's diagonal, armature left out)
+        [kg·m² or kg], averaged over the poses ``q`` (n, k) (every ``every``-th): the torque a unit acceleration
+        of that joint alone needs, less the torque of none (inverse dynamics is linear in the accelerations)."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))[:: max(1, int(every))]
+        z = np.zeros_like(q)
+        base = self.torques(q, z, z)
+        out = np.empty(q.shape[1])
+        for k in range(q.shape[1]):
+            a = z.copy()
+            a[:, k] = 1.0
+            out[k] = float(np.mean(self.torques(q, z, a)[:, k] - base[:, k]))
+        return out
+
     def candidates(self) -> list[BodyMass]:
         """Bodies with mass that hang from at least one recorded joint."""
         m = self.model

@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from ...params import ActuatorParams
+from ..effects import registry
 from ..frame import equation_error as ee
 from ..pipeline import DiagnoseOptions, diagnose
 from ..report.document import DiagnosisReport
@@ -105,6 +106,36 @@ def _load_words(model_joint: str, corrected: bool) -> str:
             f"motion ({'with the body findings written in' if corrected else 'the MJCF nominal'})")
 
 
+def _as_joint(sig, p: ActuatorParams, tau_out, qdd, inertia_out: float, why: str):
+    """The joint's recording and parameters for its own diagnosis: the body's mean inertia on the joint moves with
+    the rotor (``J + M̄_jj / N²``), the rest of the body's torque (``τ_body - M̄_jj q̈``: gravity, the other joints'
+    accelerations, velocity terms, the pose's change of inertia) is the known load. The mechanical equation is the
+    same either way; the joint's window replay then integrates its motion on the inertia it really has, not on the
+    rotor alone under a prescribed inertial torque (which no simulated speed can follow)."""
+    n_gear = p.gear.gear_ratio
+    p_j = p.replace(**{"motor.rotor_inertia": p.motor.rotor_inertia + inertia_out / (n_gear * n_gear)})
+    return with_load(sig, tau_out - inertia_out * qdd, why + f"; less its mean inertia {inertia_out:.4g} kg*m^2 "
+                     "times the joint's acceleration, which moves with the rotor"), p_j
+
+
+def _rotor_inertia_back(report: DiagnosisReport, nominal: ActuatorParams, used: ActuatorParams) -> DiagnosisReport:
+    """The body's share of the inertia taken back out of the joint's updated parameters and its inertia findings:
+    the parameter file is the actuator's."""
+    share = used.motor.rotor_inertia - nominal.motor.rotor_inertia
+    if report.updated_params is not None:
+        report.updated_params = report.updated_params.replace(
+            **{"motor.rotor_inertia": report.updated_params.motor.rotor_inertia - share})
+    report.nominal_params = nominal
+    names = {p.name for e in registry.by_field("motor.rotor_inertia") for p in e.params if p.field == "motor.rotor_inertia"}
+    for f in report.findings:
+        for name in names & set(f.get("parameters", {})):
+            if isinstance(f["parameters"][name], (int, float)):
+                f["parameters"][name] -= share
+    report.notes.append(f"the body's mean inertia on this joint ({share:.4g} kg*m^2 at the motor) moved with the rotor "
+                        "in its equations and replays; taken back out of the written parameters")
+    return report
+
+
 def diagnose_robot(signals: Mapping[str, Any], params, mjcf, *, joint_map: Mapping[str, str] | None = None,
                    options: DiagnoseOptions | None = None, joints_diagnosed: bool = True) -> RobotReport:
     """Diagnose a multi-joint recording (``signals``: recorded joint name -> cleaned :class:`..signals.Signals`,
@@ -136,9 +167,11 @@ def diagnose_robot(signals: Mapping[str, Any], params, mjcf, *, joint_map: Mappi
         if found.findings:
             body = body.with_mass(found.changes)
             tau = body.torques(motion.q, motion.qd, motion.qdd)
+        inertia = body.joint_inertia(motion.q)
         for k, j in enumerate(names):
-            sig = with_load(signals[j], tau[:, k], _load_words(model_of[j], bool(found.findings)))
-            reports[j] = diagnose(sig, ps[j], options=options)
+            sig, p_j = _as_joint(signals[j], ps[j], tau[:, k], motion.qdd[:, k], float(inertia[k]),
+                                 _load_words(model_of[j], bool(found.findings)))
+            reports[j] = _rotor_inertia_back(diagnose(sig, p_j, options=options), ps[j], p_j)
     src = mjcf if isinstance(mjcf, (str, Path)) and not str(mjcf).lstrip().startswith("<") else ""
     return RobotReport(str(src), body.joint_map, found, reports, notes)
 
