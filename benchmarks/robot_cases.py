@@ -187,6 +187,16 @@ def diagnose_case(csv: Path, **options):
     return diagnose_robot_file(csv, _nominal(), MJCF, joint_map=JOINT_MAP, **options)
 
 
+def diagnose_single_joints(csv: Path) -> dict:
+    """The single-joint route on the same file, for comparison: each joint alone (``--joint``), no body model
+    (the load as the generic per-joint forms see it)."""
+    from bldc_actuator.diagnosis.io import cleaning, loaders
+    from bldc_actuator.diagnosis.pipeline import diagnose
+
+    p = _nominal()
+    return {j: diagnose(cleaning.clean(loaders.load(csv, params=p, joint=j), params=p), p) for j in RECORDED}
+
+
 def score(case: str, report) -> dict:
     """Named effects per joint and body against the truth: hits, false positives, values."""
     from bldc_actuator.diagnosis.effects import registry
@@ -219,6 +229,8 @@ def main(argv=None) -> int:
     ap.add_argument("--cases", default=",".join(CASES))
     ap.add_argument("--out", default=None, help="directory for the CSVs (default: a temporary one)")
     ap.add_argument("--seed-offset", type=int, default=0, help="0 = the published seed; >= 1 are held back")
+    ap.add_argument("--single-joint", action="store_true",
+                    help="also diagnose each joint alone (the single-joint route, no MJCF) on the same files")
     args = ap.parse_args(argv)
     import tempfile
 
@@ -246,6 +258,11 @@ def main(argv=None) -> int:
             print(f"  {rec} ({JOINT_MAP[rec]}): {r.verdict_kind}: {vals or 'nothing named'}; truth "
                   f"{s['truth_actuators'][rec] or 'nominal'}")
         print(f"  false positives {s['false_positives'] or 'none'}; missed {s['missed'] or 'none'}", flush=True)
+        if args.single_joint:
+            t3 = time.perf_counter()
+            alone = diagnose_single_joints(csv)
+            print(f"  single-joint route ({time.perf_counter() - t3:.1f} s): " + "; ".join(
+                f"{j}: {r.verdict_kind}: {', '.join(r.effects) or 'nothing named'}" for j, r in alone.items()), flush=True)
     print(f"total false positives: {total_fp}")
     return 0
 

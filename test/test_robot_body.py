@@ -83,3 +83,34 @@ def test_the_payload_is_read_apart_from_a_joints_torque_constant_and_friction(ar
                                  joints_diagnosed=False)
     assert [f.body for f in report.body.findings] == ["payload"]
     assert report.body.findings[0].delta_mass == pytest.approx(rc.truth("all").body_mass["payload"], rel=0.05)
+
+
+def test_the_command_line_names_a_bad_joint_map_entry(arm_logs, capsys):
+    from bldc_actuator.cli import main
+
+    rc_ = main(["diagnose", str(arm_logs["null"]), "--params", "ak80_9", "--mujoco-model", str(rc.MJCF),
+                "--joint-map", "joint1=shoulder_yaw,joint9=elbow", "--quiet"])
+    assert rc_ == 2
+    assert "--joint-map: no joint 'joint9' in the recording (it holds: joint1, joint2, joint3)" in capsys.readouterr().err
+
+
+def test_the_command_line_writes_one_report_for_the_robot(arm_logs, tmp_path, capsys):
+    """``diagnose --mujoco-model``: the body's finding and a section per joint, in the JSON and the markdown."""
+    import json
+
+    from bldc_actuator.cli import main
+
+    out = tmp_path / "robot.json"
+    assert main(["diagnose", str(arm_logs["payload"]), "--params", "ak80_9", "--mujoco-model", str(rc.MJCF),
+                 "--joint-map", ",".join(f"{a}={b}" for a, b in rc.JOINT_MAP.items()), "--json", str(out),
+                 "--report", str(tmp_path / "rep"), "--no-plots", "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    assert printed.startswith("body: body 'payload' is 0.2")
+    d = json.loads(out.read_text())
+    assert [f["body"] for f in d["body"]["findings"]] == ["payload"]
+    assert set(d["joints"]) == set(rc.JOINT_MAP) and d["joint_map"]["joints"] == rc.JOINT_MAP
+    for j in rc.JOINT_MAP:       # the per-joint diagnosis knows the arm's gravity: no per-joint load named
+        assert not any(f["effect"] == "position_dependent_load" for f in d["joints"][j]["findings"])
+    md = (tmp_path / "rep" / "report.md").read_text()
+    assert "## The body" in md and all(f"### {j}" in md for j in rc.JOINT_MAP)
+    assert (tmp_path / "rep" / "joint1" / "report.md").is_file()
