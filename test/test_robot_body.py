@@ -103,7 +103,8 @@ def test_the_command_line_writes_one_report_for_the_robot(arm_logs, tmp_path, ca
     out = tmp_path / "robot.json"
     assert main(["diagnose", str(arm_logs["payload"]), "--params", "ak80_9", "--mujoco-model", str(rc.MJCF),
                  "--joint-map", ",".join(f"{a}={b}" for a, b in rc.JOINT_MAP.items()), "--json", str(out),
-                 "--report", str(tmp_path / "rep"), "--no-plots", "--quiet"]) == 0
+                 "--report", str(tmp_path / "rep"), "--updated-params", str(tmp_path / "fitted.yaml"), "--no-plots",
+                 "--quiet"]) == 0
     printed = capsys.readouterr().out
     assert printed.startswith("body: body 'payload' is 0.2")
     d = json.loads(out.read_text())
@@ -114,3 +115,10 @@ def test_the_command_line_writes_one_report_for_the_robot(arm_logs, tmp_path, ca
     md = (tmp_path / "rep" / "report.md").read_text()
     assert "## The body" in md and all(f"### {j}" in md for j in rc.JOINT_MAP)
     assert (tmp_path / "rep" / "joint1" / "report.md").is_file()
+    # each joint's parameter file is the actuator's: the body's inertia, moved onto the rotor for the joint's own
+    # equations and replays, is not written into it
+    from bldc_actuator.params import load_preset
+
+    for j in rc.JOINT_MAP:
+        fitted = load_preset(tmp_path / f"fitted.{j}.yaml")
+        assert fitted.motor.rotor_inertia == pytest.approx(rc._nominal().motor.rotor_inertia, rel=1e-9)

@@ -44,7 +44,8 @@ def register(subparsers) -> None:
     p.add_argument("--json", metavar="REPORT.json", help="write the JSON report here")
     p.add_argument("--report", metavar="DIR", help="write report.md and PNG plots into DIR")
     p.add_argument("--updated-params", metavar="OUT.yaml",
-                   help="write the parameter file with the accepted effects fitted")
+                   help="write the parameter file with the accepted effects fitted (with --mujoco-model: one per "
+                        "joint, OUT.<joint>.yaml)")
     p.add_argument("--effects", metavar="a,b", help="test only these candidate effects (comma-separated)")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--holdout", type=float, default=0.3, metavar="FRACTION",
@@ -202,6 +203,14 @@ def _run_robot(args, params, mapping, effects, progress) -> int:
         report.write_json(args.json)
     if args.report:
         report.write_markdown(args.report, plots=not args.no_plots)
+    written = []
+    if args.updated_params:        # one parameter file per joint: OUT.yaml -> OUT.<joint>.yaml
+        out = Path(args.updated_params)
+        for j, r in report.joints.items():
+            if r.updated_params is not None:
+                path = out.with_name(f"{out.stem}.{j}{out.suffix or '.yaml'}")
+                r.write_params(path)
+                written.append(str(path))
     for f in report.body.findings:
         print(f"body: {f.sentence()}")
     if not report.body.findings:
@@ -213,6 +222,8 @@ def _run_robot(args, params, mapping, effects, progress) -> int:
     for name, path in (("json", args.json), ("report", args.report and str(Path(args.report) / "report.md"))):
         if path:
             print(f"  wrote {name}: {path}")
+    for path in written:
+        print(f"  wrote updated params: {path}")
     return 0
 
 
