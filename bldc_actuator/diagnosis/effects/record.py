@@ -29,6 +29,9 @@ class Route(enum.Enum):
     #: found by the torque-balance route (a measured torque and motion, no motor current: diagnosis.torque_balance)
     #: from the torque alone, never a candidate of the full route
     TORQUE_BALANCE = "torque_balance"
+    #: a parameter of the robot's multibody model (a link or payload mass), found by the robot route
+    #: (diagnosis.body) jointly over every joint from the MJCF's inverse dynamics, never a per-joint candidate
+    BODY = "body"
 
 
 class Story(enum.Enum):
@@ -71,7 +74,7 @@ class Effect:
     name: str                                   #: identifier (the JSON report's ``effect``)
     rank: int                                   #: catalogue order (the order effects are tried and listed)
     description: str                            #: plain words: what physics this is
-    equations: tuple[str, ...]                  #: "mechanical" | "electrical" | "tracking" | "thermal" | "torque_balance"
+    equations: tuple[str, ...]                  #: "mechanical" | "electrical" | "tracking" | "thermal" | "torque_balance" | "body"
     needs: tuple[str, ...]                      #: recorded channels ("a|b" = either)
     simulated: bool                             #: has a simulator term (parameters in the schema)
     route: Route = Route.LINEAR
@@ -119,7 +122,7 @@ class Effect:
     def candidate(self) -> bool:
         """One of the candidate effects a run tests (``--effects``, frame.candidates.library); the drive's own form
         is identified by the pipeline in every run instead, a torque-balance finding by that route."""
-        return self.route not in (Route.DRIVE_FORM, Route.TORQUE_BALANCE)
+        return self.route not in (Route.DRIVE_FORM, Route.TORQUE_BALANCE, Route.BODY)
 
     @property
     def special(self) -> bool:
