@@ -267,5 +267,18 @@ def test_a_friction_growing_with_the_transmitted_torque_is_named_without_a_curre
     assert abs(kr["value"] - K / R) <= 3 * kr["sd"] + 0.05 * K / R, kr
     assert vm.effect_for("motor.phase_resistance") not in named
     assert "outside the catalogue" not in rep.verdict
+    # the same log as a training file and a separate held-out file (--holdout-file): judged on the second
+    cut = t < 0.7 * dur
+    parts = []
+    for name, sel in (("train.csv", cut), ("heldout.csv", ~cut)):
+        part = tmp_path / name
+        part.write_text(",".join(cols) + "\n" + "\n".join(",".join(f"{v:.10g}" for v in r) for r in
+                                                           np.column_stack([x[sel] for x in cols.values()])) + "\n")
+        parts.append(_signals(part, p))
+    split = vm.diagnose(parts[0], p, holdout_signals=parts[1])
+    hit = {f.effect: f for f in split.findings}.get(gear)
+    assert hit is not None, ([(r.effect, r.reason) for r in split.rejected], split.notes)
+    assert abs(hit.parameters["gear_load_friction"] - mu) <= 3 * hit.uncertainty["gear_load_friction"] + 0.05 * mu
+    assert hit.simulation["windows"] >= 10
     clean_rep = pipeline.diagnose(_signals(friction_log, p), p)
     assert gear not in {f["effect"] for f in clean_rep.findings}, clean_rep.verdict

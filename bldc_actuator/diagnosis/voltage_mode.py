@@ -350,8 +350,22 @@ COMBINATIONS = {
 }
 
 
+def _join(sig: Signals, other: Signals) -> tuple[Signals, int]:
+    """``sig`` with a second recording appended as segments of their own (its time shifted past sig's end by a
+    second: no interval or window spans the two), and the number of sig's samples."""
+    n1, n2 = len(sig.time), len(other.time)
+    t2 = other.time - (other.time[0] if n2 else 0.0) + (sig.time[-1] + 1.0 if n1 else 0.0)
+    names = set(sig.channels) | set(other.channels)
+    nan = lambda k: np.full(k, np.nan)  # noqa: E731
+    ch = {k: np.concatenate([sig.channels.get(k, nan(n1)), other.channels.get(k, nan(n2))]) for k in names}
+    segs = list(sig.segments or [(0, n1)]) + [(a + n1, b + n1) for a, b in (other.segments or [(0, n2)])]
+    return Signals(np.concatenate([sig.time, t2]), ch, source=sig.source, segments=segs, meta=dict(sig.meta)), n1
+
+
 def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0.05,
-             max_relative_uncertainty: float = 0.5) -> VoltageModeResult:
+             max_relative_uncertainty: float = 0.5, holdout_signals: Signals | None = None) -> VoltageModeResult:
+    """The route on ``sig``; the held-out data are interleaved blocks of it (a fraction ``holdout``) or, given,
+    the separate recording ``holdout_signals`` (every sample of ``sig`` then fits, every one of it judges)."""
     m, e = params.motor, params.effects
     K, R, J = float(m.torque_constant_q), float(m.phase_resistance), float(m.rotor_inertia)
     tau_e = float(m.q_inductance) / R
@@ -365,6 +379,9 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
     def rest(tho):          # the nominal load's other parts at the output (constant, spring) [N*m]
         return float(ld.load_torque) + float(ld.spring_stiffness) * (tho - float(ld.spring_zero))
 
+    n_train = None
+    if holdout_signals is not None and len(holdout_signals.time):
+        sig, n_train = _join(sig, holdout_signals)
     c, lagged, how = _columns(sig, tau_e)
     notes = [f"no current sensor: the mechanical equation closed by the voltage, i = (v - K ω)/R"
              + (f" lagged by L/R = {1e3 * tau_e:.3g} ms (resolved by the sampling)" if lagged else
@@ -408,7 +425,9 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
     base = J * dw - sum(nominal[k] * cols[k] for k in cols if k != "offset")
     if c.th is not None:
         base = base + mean(rest(c.th / N)) / N
-    test = _blocks(n, holdout)
+    test = _blocks(n, holdout) if n_train is None else starts >= n_train
+    every = np.ones(n, bool) if n_train is None else ~test     # what the BIC and the final fit see
+    n_fit = int(every.sum())
     train = ~test
 
     def keys(free):
@@ -424,7 +443,7 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
         return float(np.sqrt(np.mean((base[test] - pred) ** 2)))
 
     def rss(free):
-        return float(np.sum(fit(free, np.ones(n, bool))[2] ** 2))
+        return float(np.sum(fit(free, every)[2] ** 2))
 
     # forward selection of the freed combinations (the constant torque is always free: a nuisance)
     free = ["offset"]
@@ -450,7 +469,8 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
     left = list(terms)
     while left:
         r0 = rss(free)
-        trials = {k: _bic(r0, n, len(keys(free))) - _bic(rss(free + [k]), n, len(keys(free + [k]))) for k in left}
+        trials = {k: _bic(r0, n_fit, len(keys(free))) - _bic(rss(free + [k]), n_fit, len(keys(free + [k])))
+                  for k in left}
         k = max(trials, key=trials.get)
         before, after = heldout(free), heldout(free + [k])
         if trials[k] > BIC_GATE and after < before:
@@ -464,7 +484,7 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
 
     # the identified combinations: every coefficient free (what the data say, with their uncertainties)
     all_free = ["offset"] + terms
-    coef_all, cov_all, _ = fit(all_free, np.ones(n, bool))
+    coef_all, cov_all, _ = fit(all_free, every)
     ia = {k: i for i, k in enumerate(keys(all_free))}
 
     def val(k):
@@ -516,7 +536,7 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
                                    "what": "phi_g", "identifiable": "identified (independent of J)"}
 
     # the final model and its uncertainties
-    coef, cov, _ = fit(free, np.ones(n, bool))
+    coef, cov, _ = fit(free, every)
     idx = {k: i for i, k in enumerate(keys(free))}
     final = dict(nominal)
     for k in keys(free):
@@ -525,7 +545,7 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
     # judge: the held-out windows replayed under the recorded voltage, leave one out
     dt_med = float(np.median(np.diff(sig.time))) if len(sig.time) > 1 else 1.0
     length = max(8, int(round(WINDOW_S / dt_med)))
-    test_all = _blocks(len(rows), holdout)
+    test_all = _blocks(len(rows), holdout) if n_train is None else rows >= n_train
     wins = _windows(c, test_all, rows, length)
     base_coef = dict(nominal, offset=final["offset"])
     err_final = _replay(c, wins, J, final, rest, N, K)
@@ -667,7 +687,8 @@ def report(signals, params, res: VoltageModeResult, options, say, t_start: float
         updated_params=updated_params(params, res), nominal_params=params, timing=timing,
         method="voltage mode (no current sensor)",
         setup={"rate_hz": (getattr(signals, "meta", {}) or {}).get("rate_hz"), "samples": int(len(signals.time)),
-               "holdout": f"{options.holdout:g} of the samples (interleaved blocks)",
+               "holdout": ("separate recording" if getattr(options, "holdout_signals", None) is not None else
+                           f"{options.holdout:g} of the samples (interleaved blocks)"),
                "effects_tested": [effect_for(f) for f in ("motor.phase_resistance", "motor.viscous_damping",
                                                            COULOMB_FIELD, GEAR_FIELD, "load.gravity_torque")],
                "source": getattr(signals, "source", "")})
