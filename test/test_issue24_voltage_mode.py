@@ -223,7 +223,8 @@ def _servo_duty(t, th, w, dur):
     halfway (the same motion at other torque levels), clipped to ±1."""
     kp = 1.0 if t < dur / 2 else 3.0
     r = 1.2 * np.sin(2 * np.pi * 0.23 * t) + 0.4 * np.sin(2 * np.pi * 0.87 * t + 1.0)
-    dr = 1.2 * 2 * np.pi * 0.23 * np.cos(2 * np.pi * 0.23 * t) + 0.4 * 2 * np.pi * 0.87 * np.cos(2 * np.pi * 0.87 * t + 1.0)
+    dr = (1.2 * 2 * np.pi * 0.23 * np.cos(2 * np.pi * 0.23 * t)
+          + 0.4 * 2 * np.pi * 0.87 * np.cos(2 * np.pi * 0.87 * t + 1.0))
     return float(np.clip(kp * (r - th / GEAR) + 0.05 * (dr - w / GEAR), -1.0, 1.0))
 
 
