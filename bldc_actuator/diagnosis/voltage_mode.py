@@ -596,13 +596,21 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
         moved, ref = ((par["viscous_damping_given_nominal_K"], float(m.viscous_damping)) if k == "damping"
                       else (value, float(ld.gravity_torque)) if k == "load" else (value, nominal[k]))
         rel = abs(moved - ref) / abs(ref) if ref else math.inf
+        what = "it"
+        if k == "gear":
+            # an additive friction term: its practical size is its share of the friction it joins, mu |tau_m|
+            # against tau_c + mu |tau_m| over the fitted intervals (the nominal mu's share for a change of mu)
+            tm = float(np.mean(np.abs(final["k_over_r"] * v_emf[every])))
+            total = max(final["coulomb"], 0.0) + max(value, 0.0) * tm
+            rel = abs(value - nominal["gear"]) * tm / total if total > 0 else math.inf
+            what = "the friction"
         reason = ""
         if not (len(d) >= 3 and np.mean(d) > 2 * se):
             reason = (f"not confirmed by the held-out replay ({len(d)} windows: speed error RMS without it "
                       f"{simrec['without']:.4g}, with it {simrec['with']:.4g} rad/s)" if len(d) else
                       "no held-out window to replay")
         elif rel <= tolerance:
-            reason = f"consistent with nominal (changes it by {100 * rel:.1f} % <= {100 * tolerance:g} %)"
+            reason = f"consistent with nominal (changes {what} by {100 * rel:.1f} % <= {100 * tolerance:g} %)"
         elif not (abs(s) <= max_relative_uncertainty * abs(value)):
             reason = f"suspected, not identifiable (sd {s:.3g} > {max_relative_uncertainty:g} x |{value:.3g}|)"
         term = Term(effect, par, unc, un, ho, float(dbic), not reason, reason, simrec)
