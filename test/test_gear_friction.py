@@ -65,6 +65,23 @@ def test_a_load_adds_to_the_breakaway_and_a_gear_with_mu_above_one_self_locks():
     assert _breakaway(1.2) is None                   # μ >= 1: the motor's own torque never breaks it free
 
 
+def test_the_energy_ledger_closes_with_gear_friction():
+    """The gear friction's work is friction work: electrical in = Joule + ΔE_mag + ΔE_kin + viscous + friction
+    to 1e-6 under a chirp through reversals and stick/slip, and it dissipates more than Coulomb friction alone."""
+    from bldc_actuator import profiles
+
+    out = {}
+    for mu in (0.0, 0.4):
+        act = Actuator(ActuatorParams().replace(**{"effects.coulomb_friction": 0.02, "effects.gear_load_friction": mu,
+                                                   "motor.viscous_damping": 1e-4}))
+        e0 = act.energy
+        act.run(profiles.chirp(6.0, 0.2, 8.0, duration=4.0, rate=1000.0))
+        e = act.energy
+        assert abs(e.residual(e0)) <= 1e-6 * e.electrical_in
+        out[mu] = e.friction
+    assert out[0.4] > 1.2 * out[0.0] > 0
+
+
 def test_the_shared_term_is_mu_times_the_absolute_torque():
     assert effects.gear_load_friction(np.array([-2.0, 0.0, 3.0]), 0.25) == pytest.approx([0.5, 0.0, 0.75])
 
