@@ -23,6 +23,17 @@ def friction_magnitude(direction, speed, coulomb, asymmetry, stribeck, stribeck_
     return np.maximum(value, 0.0)
 
 
+def gear_load_friction(transmitted_torque, coefficient):
+    """Friction of a gear that grows with the torque it transmits: ``μ |τ_m|`` [N·m] added to the kinetic AND
+    static friction magnitude (:func:`friction_magnitude`), ``τ_m`` = the motor's electromagnetic torque
+    ``K i_q`` [N·m, motor side], ``coefficient`` = μ [-] (dimensionless, the same number at the motor or the
+    output side: both torques scale by the gear ratio). The load-dependent friction of Rhoban's BAM ("Extended
+    friction models for the physics simulation of servo actuators", Duclusaud, Passault et al. 2024, model M3:
+    ``τ_fm = K_c + K_v|ω| + K_l |τ_gearbox|``), with the gear's torque taken as the motor's: see
+    :mod:`bldc_actuator.diagnosis.effects.torque_dependent_gear_friction` for the choice."""
+    return coefficient * np.abs(transmitted_torque)
+
+
 def friction_basis(omega, stribeck_velocity, smoothing_velocity=0.0):
     """Regressor columns of the friction torque for fitting: ``τ_f = basis @ [τ_c, τ_asym, τ_s]``.
 

@@ -172,8 +172,9 @@ class _Coeffs:
         self.has_stribeck = bool(np.any(self.tau_s))
         self.fe_h = e("iron_loss_hysteresis")
         self.fe_e = e("iron_loss_eddy")
+        self.mu_gear = e("gear_load_friction")         # friction per N*m the motor transmits to the gear
         self.has_friction = bool(np.any(self.tau_c) or np.any(self.tau_asym) or np.any(self.tau_s)
-                                 or np.any(self.fe_h))
+                                 or np.any(self.fe_h) or np.any(self.mu_gear))
         self.sens_off_a, self.sens_off_b = d("current_sensor_offset_a"), d("current_sensor_offset_b")
         self.sens_gain_a, self.sens_gain_b = d("current_sensor_gain_a"), d("current_sensor_gain_b")
         self.v_dt = d("dead_time") * d("pwm_frequency") * self.V_bus

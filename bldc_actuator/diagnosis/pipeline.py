@@ -124,7 +124,8 @@ def _voltage_mode(signals, params: ActuatorParams, options: DiagnoseOptions) -> 
     t_start = time.perf_counter()
     say(f"1/6 prepare: voltage and motion logged, no current: the voltage-mode route ({len(signals.time)} samples)")
     res = voltage_mode.diagnose(signals, params, holdout=options.holdout, tolerance=options.tolerance,
-                                max_relative_uncertainty=options.max_relative_uncertainty)
+                                max_relative_uncertainty=options.max_relative_uncertainty,
+                                holdout_signals=options.holdout_signals)
     say(f"4/6 attribute: accepted {[f.effect for f in res.findings] or 'nothing'}")
     return voltage_mode.report(signals, params, res, options, say, t_start)
 

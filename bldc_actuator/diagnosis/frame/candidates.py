@@ -1288,7 +1288,7 @@ def implausible(cand: Candidate, coef, cov, keys, variant: Variant, ctx) -> str 
         if v is not None:
             checks.append((lo * nominal <= v <= hi * nominal,
                            f"{name} {v:.3g} outside [{lo:g}, {hi:g}] x nominal {nominal:.3g}"))
-    for name in ("viscous_damping", "coulomb_friction", "stribeck_friction", "dead_time_voltage"):
+    for name in ("viscous_damping", "coulomb_friction", "stribeck_friction", "dead_time_voltage", "gear_load_friction"):
         v, sd = val(name)
         if v is not None and isinstance(v, float):
             checks.append((v + 3.0 * sd >= 0.0, f"{name} {v:.3g} < 0"))

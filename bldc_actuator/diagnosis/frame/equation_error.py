@@ -1070,8 +1070,10 @@ def _build_blocks(ctx: Context) -> None:
     ones = np.ones(n, bool)
     if "i_q" in S and "omega" in S:
         w, ws = S["omega"], S["omega_s"]
-        tau_f = effects.friction_basis(ws, e.stribeck_velocity, ctx.omega_eps) @ np.array(
-            [e.coulomb_friction, e.friction_asymmetry, e.stribeck_friction])
+        basis = effects.friction_basis(ws, e.stribeck_velocity, ctx.omega_eps)
+        tau_f = basis @ np.array([e.coulomb_friction, e.friction_asymmetry, e.stribeck_friction])
+        if e.gear_load_friction:     # the gear's friction grows with the motor's torque K i_q
+            tau_f = tau_f + basis[:, 0] * effects.gear_load_friction(S["K"] * S["i_q"], e.gear_load_friction)
         tau_cog = effects.cogging_torque(S["theta"], e.cogging_order, e.cogging_cos, e.cogging_sin) \
             if e.cogging_order and len(e.cogging_cos) else np.zeros(n)
         if "torque" in have:
