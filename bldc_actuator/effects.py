@@ -121,6 +121,14 @@ def derate_scale(winding_temperature, derate_temperature, trip_temperature):
 SAT_REF_CURRENT = 1.0
 
 
+def saturation_shape(i_q, n):
+    """The saturation law's shape [A]: ``|i_q| (|i_q| / 1 A)^(n - 1)``, so K(i)/K = 1 - k_sat * shape (before the
+    floor). :func:`saturation_factor` holds the same expression inline (it is compiled for the kernel, which calls
+    no uncompiled helper); the diagnosis's regressor column is built from this one."""
+    a = np.abs(i_q)
+    return a * (np.maximum(a, 1e-300) / SAT_REF_CURRENT) ** (n - 1.0)
+
+
 def saturation_factor(i_q, k_sat, n=1.0):
     """K(i_q)/K = max(0.2, 1 - k_sat |i_q| (|i_q| / 1 A)^(n - 1)): cross-saturation of the magnet flux by the
     q-axis current [A], a power law in |i_q| with exponent ``n`` (monotone for n > 0; n = 1 is the linear law
