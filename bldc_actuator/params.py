@@ -235,7 +235,7 @@ class EffectsParams:
     kt_saturation: float = _p(0.0, "1/A", "k_sat: magnetic saturation, K(i_q) = K (1 - k_sat |i_q| (|i_q| / 1 A)^(n-1)) "
                               "(floored at 0.2 K) in torque and back-EMF alike: the fractional drop per ampere at "
                               "1 A (n = 1: K (1 - k_sat |i_q|))", 0.0, 1.0)
-    kt_saturation_exponent: float = _p(1.0, "", "n: exponent of the saturation law in |i_q| (1 = linear; real "
+    kt_saturation_exponent: float = _p(1.0, "1", "n: exponent of the saturation law in |i_q| (1 = linear; real "
                                        "curves 0.5..4)", 0.5, 4.0, limits=(0.0, 16.0, True))
 
 

@@ -31,8 +31,8 @@ EFFECT = Effect(
     equations=("mechanical", "electrical"), needs=("current", "velocity|position"), simulated=True,
     confusable={"torque_constant_error": "steps to several current levels: saturation only bends the top"},
     params=(Param("kt_saturation", "1/A", "effects.kt_saturation"),
-            Param("kt_saturation_exponent", "", "effects.kt_saturation_exponent"),
-            Param("saturation_drop_at_peak", ""),
+            Param("kt_saturation_exponent", "1", "effects.kt_saturation_exponent"),
+            Param("saturation_drop_at_peak", "1"),
             Param("peak_current", "A")),
     story=Story.CURRENT_TREND,
 )
@@ -95,9 +95,9 @@ def to_params(coef, cov, keys, variant, ctx):
     shape = float(terms.saturation_shape(i_pk, n))
     return {"kt_saturation": {"value": k, "sd": sd(cov, 0), "unit": "1/A",
                               "field": "effects.kt_saturation" if ok else None, "delta": k},
-            EXPONENT: {"value": n, "sd": float("nan"), "unit": "",
+            EXPONENT: {"value": n, "sd": float("nan"), "unit": "1",
                        "field": "effects.kt_saturation_exponent" if ok else None},
-            "saturation_drop_at_peak": {"value": k * shape, "sd": sd(cov, 0) * shape, "unit": "", "field": None},
+            "saturation_drop_at_peak": {"value": k * shape, "sd": sd(cov, 0) * shape, "unit": "1", "field": None},
             "peak_current": {"value": i_pk, "sd": 0.0, "unit": "A", "field": None}}
 
 
