@@ -87,7 +87,9 @@ def excited(ctx):
 
 def to_params(coef, cov, keys, variant, ctx):
     """k_sat (the coefficient: a negative value, torque rising with current, has no simulator term), the exponent
-    (its sd is the final fit's), and the drop they give at the recording's peak current."""
+    (its sd is the final fit's), and the drop they give at the recording's peak current. The drop's sd is
+    shape x sd(k_sat) with k_sat's marginal sd (which carries its correlation with n): an upper bound, the drop at
+    the peak being the better-determined combination of the two."""
     k = float(coef[0])
     n = float(variant.hyper.get(EXPONENT, 1.0))
     ok = k > 0
