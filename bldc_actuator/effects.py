@@ -128,10 +128,26 @@ def derate_scale(winding_temperature, derate_temperature, trip_temperature):
 
 # -- magnetic saturation ----------------------------------------------------------------------------
 
-def saturation_factor(i_q, k_sat):
-    """K(i_q)/K = max(0.2, 1 - k_sat |i_q|): cross-saturation of the magnet flux by the q-axis current [A]
-    (``k_sat`` [1/A]); the same factor scales torque and back-EMF, so the energy exchange stays consistent."""
-    return np.maximum(1.0 - k_sat * np.abs(i_q), 0.2)
+#: the current the saturation law is read at [A]: K(i) = K (1 - k_sat SAT_REF_CURRENT (|i|/SAT_REF_CURRENT)^n)
+SAT_REF_CURRENT = 1.0
+
+
+def saturation_shape(i_q, n):
+    """The saturation law's shape [A]: ``|i_q| (|i_q| / 1 A)^(n - 1)``, so K(i)/K = 1 - k_sat * shape (before the
+    floor). :func:`saturation_factor` holds the same expression inline (it is compiled for the kernel, which calls
+    no uncompiled helper); the diagnosis's regressor column is built from this one."""
+    a = np.abs(i_q)
+    return a * (np.maximum(a, 1e-300) / SAT_REF_CURRENT) ** (n - 1.0)
+
+
+def saturation_factor(i_q, k_sat, n=1.0):
+    """K(i_q)/K = max(0.2, 1 - k_sat |i_q| (|i_q| / 1 A)^(n - 1)): cross-saturation of the magnet flux by the
+    q-axis current [A], a power law in |i_q| with exponent ``n`` (monotone for n > 0; n = 1 is the linear law
+    ``1 - k_sat |i_q|`` exactly, the factor (|i|/1 A)^0 being 1.0). ``k_sat`` [1/A] is the fractional drop per
+    ampere at 1 A (the drop at a current I is k_sat I (I / 1 A)^(n-1)); the same factor scales torque and
+    back-EMF, so the energy exchange stays consistent."""
+    a = np.abs(i_q)
+    return np.maximum(1.0 - k_sat * a * (np.maximum(a, 1e-300) / SAT_REF_CURRENT) ** (n - 1.0), 0.2)
 
 
 # -- iron loss -------------------------------------------------------------------------------------

@@ -45,7 +45,7 @@ _COEF_SCALARS = (
     "pole_pairs", "R_ref", "L", "K_ref", "J", "b", "T_ref", "alpha", "beta", "N", "V_bus", "V_max", "I_lim",
     "T_c", "Kp", "Ki", "decouple", "T_derate", "T_trip", "T_amb", "R_wh", "R_ha", "C_w", "C_h",
     "tau_c", "tau_asym", "tau_s", "omega_s", "mu_gear", "cog_order", "load0", "load_g", "load_phi", "load_k", "load_k0",
-    "has_alpha", "has_beta", "has_stribeck", "has_friction", "has_position_load", "k_sat",
+    "has_alpha", "has_beta", "has_stribeck", "has_friction", "has_position_load", "k_sat", "sat_n",
     "fe_h", "fe_e", "sens_off_a", "sens_off_b", "sens_gain_a", "sens_gain_b", "has_sensor_error", "v_dt", "dt_delta",
     "dt_band", "dt_start",
     "v_lim_mode", "I_fw", "R_ctl", "L_ctl", "K_ctl",
@@ -510,7 +510,7 @@ def advance(c, s, h_ns):
     R = _resistance_at(c.R_ref, s.T_w, c.T_ref, c.alpha, True) if c.has_alpha != 0.0 else c.R_ref
     K = c.K_ref * _flux_factor(s.T_h, c.T_ref, c.beta, True) if c.has_beta != 0.0 else c.K_ref  # magnet at T_h
     if c.k_sat != 0.0:   # cross-saturation by the q current at the interval start: torque and back-EMF alike
-        K = K * _saturation_factor(i0.imag, c.k_sat)
+        K = K * _saturation_factor(i0.imag, c.k_sat, c.sat_n)
     L, J = c.L, c.J
     # electrical: L di/dt = v - (R + j p w0 L) i - j K ω(t), with the speed ramping linearly over the
     # interval, ω(t) = w0 + r t, r = 2 (w - w0)/h (w = mean speed, found below). Exact solution:

@@ -198,6 +198,7 @@ class _Coeffs:
         self.load_k0 = ld("spring_zero")
         self.has_position_load = bool(np.any(self.load_g) or np.any(self.load_k))
         self.k_sat = e("kt_saturation")
+        self.sat_n = e("kt_saturation_exponent")
         g = lambda name: col(lambda p: getattr(p.gear, name))  # noqa: E731
         # transmission (output side); gear.transmission_stiffness = 0 means rigid (the kernel's rigid path)
         self.k_tr = g("transmission_stiffness")
@@ -762,7 +763,7 @@ def _torque_constant_q(c: _Coeffs, i_q, T_h):
     formula behind ``torque_em``/``effort_out`` of :meth:`Actuator.outputs` and :meth:`Actuator.joint_state`."""
     K = c.K_ref * effects.flux_factor(T_h, c.T_ref, c.beta)
     if c.batch or c.k_sat:
-        K = K * (effects.saturation_factor if c.batch else kernel._saturation_factor)(i_q, c.k_sat)  # noqa: SLF001
+        K = K * (effects.saturation_factor if c.batch else kernel._saturation_factor)(i_q, c.k_sat, c.sat_n)  # noqa: SLF001
     return K
 
 

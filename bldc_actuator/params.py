@@ -236,8 +236,11 @@ class EffectsParams:
                                      "its heat goes into the winding node", 0.0, 100.0)
     iron_loss_eddy: float = _p(0.0, "N*m*s/rad", "c_e: eddy-current iron-loss drag c_e omega (power c_e omega^2), "
                                "its heat goes into the winding node", 0.0, 100.0)
-    kt_saturation: float = _p(0.0, "1/A", "k_sat: magnetic saturation, K(i_q) = K (1 - k_sat |i_q|) (floored at "
-                              "0.2 K) in torque and back-EMF alike", 0.0, 1.0)
+    kt_saturation: float = _p(0.0, "1/A", "k_sat: magnetic saturation, K(i_q) = K (1 - k_sat |i_q| (|i_q| / 1 A)^(n-1)) "
+                              "(floored at 0.2 K) in torque and back-EMF alike: the fractional drop per ampere at "
+                              "1 A (n = 1: K (1 - k_sat |i_q|))", 0.0, 1.0)
+    kt_saturation_exponent: float = _p(1.0, "1", "n: exponent of the saturation law in |i_q| (1 = linear; real "
+                                       "curves 0.5..4)", 0.5, 4.0, limits=(0.0, 16.0, True))
 
 
 @dataclass(frozen=True)

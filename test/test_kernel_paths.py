@@ -27,7 +27,8 @@ SCENARIO = textwrap.dedent('''
         "load.spring_stiffness": 0.3,
         "motor.resistance_temperature_enabled": True, "motor.magnet_temperature_enabled": True,
         "motor.magnet_temperature_coefficient": -0.0012, "drive.derate_temperature": 30.0,
-        "drive.trip_temperature": 32.0, "thermal.winding_heat_capacity": 2.0})
+        "drive.trip_temperature": 32.0, "thermal.winding_heat_capacity": 2.0,
+        "effects.kt_saturation": 0.004, "effects.kt_saturation_exponent": 1.5})
     act = Actuator(p)
     rows = []
     for k in range(3000):                       # 3 s: chirp into the voltage limit, reversals, heating, derating

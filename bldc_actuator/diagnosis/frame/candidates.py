@@ -158,11 +158,6 @@ def col_magnet(ctx):
     return out
 
 
-def col_saturation(ctx):
-    S = ctx.sig
-    return {"mechanical": S["K"] * S["i_col"] * np.abs(S["i_col"])}
-
-
 def _sign_width(ctx, i) -> float:
     """Width [A] the dead-time sign form is smoothed over: 3 x the current's content above the low-pass (sensor
     noise, and the chatter of a drive whose sign is sampled once per control period) — the sign cannot be told
@@ -439,14 +434,6 @@ def excite_temperature(ctx):
     T = ctx.dsig("T_w")
     span = float(np.nanmax(T) - np.nanmin(T))
     return None if span >= 3.0 else f"needs a temperature change of a few K (recorded span {span:.1f} K)"
-
-
-def excite_saturation(ctx):
-    i = np.abs(ctx.dsig("i_q"))
-    lim = ctx.params.drive.current_limit
-    top = float(np.percentile(i, 99.5))
-    return None if top >= 0.4 * lim else (f"needs high current (99.5th percentile |i_q| = {top:.3g} A, "
-                                          f"limit {lim:.3g} A)")
 
 
 def excite_headroom(ctx):
@@ -857,14 +844,6 @@ def v_kt(ctx, loc):
 
 # ------------------------------------------------------------------------------ parameter mapping
 
-def params_saturation(coef, cov, keys, variant, ctx):
-    """The coefficient of the K i|i| column is the torque lost per K i|i|: the simulator's effects.kt_saturation
-    (K(i) = K (1 - k |i|)); a negative value (torque rising with current) has no simulator term."""
-    c = float(coef[0])
-    return {"kt_saturation": {"value": c, "sd": _sd(cov, 0), "unit": "1/A",
-                              "field": "effects.kt_saturation" if c > 0 else None, "delta": c}}
-
-
 def dead_time_q_factor(winding: str) -> float:
     """Angle average of the q-axis voltage error the simulator's dead-time term puts against a q-axis current,
     per V_dt = t_d f_pwm V_bus (i_d = 0), for a ``winding`` of "wye" or "delta": ``-mean e_q`` of
@@ -1110,8 +1089,6 @@ def _forms() -> dict[str, tuple]:
                                    params_r_temp, None),
         "magnet_temperature": (Single({"magnet": col_magnet}), excite_temperature,
                                params_magnet, None),
-        "magnetic_saturation": (Single({"sat": col_saturation}), excite_saturation,
-                                params_saturation, None),
         "dead_time": (v_dead_time, excite_dead_time, params_dead_time, dead_time_in_band),
         "current_loop_delay": (Single({"delay": col_delay}), None, params_delay, None),
     }
@@ -1306,10 +1283,10 @@ def implausible(cand: Candidate, coef, cov, keys, variant: Variant, ctx) -> str 
         checks.append((v - 3.0 * sd > 0.0, f"reflected load inertia {v:.3g} ± {sd:.2g} kg*m^2 not above 0"))
         checks.append((v < 0.95 * m.rotor_inertia, f"reflected load inertia {v:.3g} kg*m^2 leaves no rotor inertia "
                        f"(nominal total {m.rotor_inertia:.3g})"))
-    v, sd = val("kt_saturation")
+    v, sd = val("saturation_drop_at_peak")
     if v is not None:
-        i_max = float(np.percentile(np.abs(ctx.dsig("i_q")), 99.5))
-        checks.append((-0.05 <= v * i_max <= 0.6, f"saturation {100 * v * i_max:.3g}% at {i_max:.3g} A"))
+        i_max = val("peak_current")[0]
+        checks.append((-0.05 <= v <= 0.6, f"saturation {100 * v:.3g}% at {i_max:.3g} A"))
     for ok, why in checks:
         if not ok:
             return f"implausible fitted value: {why}"
