@@ -225,7 +225,7 @@ class EffectsParams:
                                    "subtracted for omega < 0", -100.0, 100.0)
     stribeck_friction: float = _p(0.0, "N*m", "tau_s: extra static friction decaying with speed", 0.0, 100.0)
     stribeck_velocity: float = _p(0.1, "rad/s", "omega_s: Stribeck velocity", 0.0, 1e4, lo_open=True)
-    gear_load_friction: float = _p(0.0, "", "mu: gear friction growing with the transmitted torque, kinetic and "
+    gear_load_friction: float = _p(0.0, "1", "mu: gear friction growing with the transmitted torque, kinetic and "
                                    "static friction + mu |K i_q| (the motor's electromagnetic torque; BAM's K_l); "
                                    ">= 1 is a self-locking gear", 0.0, 2.0)
     cogging_order: int = _p(0, "", "N_c: cogging periods per mechanical revolution (lcm(slots, 2p)); 0 = off",
