@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 from ..params import ActuatorParams
-from .frame import candidates as cands
+from .effects import registry
 from .report.document import DiagnosisReport
 from .frame.selection import GateConfig
 from .fit import stage as refit
@@ -69,7 +69,7 @@ class DiagnoseOptions:
     voltage_timing: str = "auto"
 
     def validated_effects(self) -> list[str]:
-        names = list(cands.EFFECT_NAMES)
+        names = list(registry.names(registry.candidates()))   # read now: a plug-in effect counts
         if self.effects is None:
             return names
         bad = [e for e in self.effects if e not in names]
