@@ -64,6 +64,9 @@ class Forms:
     to_params: Callable
     #: (ctx) -> None | (why, what to do): its own reason when the held-out gate cannot decide it
     undecided_why: Callable | None = None
+    #: (parameters, ctx) -> None | why: a plausibility check beyond its Params' bounds, for a range that depends on
+    #: the recording (``parameters`` as ``to_params`` returns them)
+    implausible: Callable | None = None
 
 
 def v_single(effect, cols, label="", **kw):

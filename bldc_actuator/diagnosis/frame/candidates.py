@@ -322,6 +322,10 @@ def implausible(cand: Candidate, coef, cov, keys, variant: Variant, ctx) -> str 
             why = bound.violation(prm, x["value"], x.get("sd", 0.0), ctx.params)
             if why:
                 return f"implausible fitted value: {why}"
+    own = registry.forms(cand.name) if registry.known(cand.name) else None
+    why = own.implausible(pars, ctx) if own is not None and own.implausible is not None else None
+    if why:
+        return f"implausible fitted value: {why}"
     # magnetic_saturation's forms are still this module's (_forms): its bound depends on the recorded current
     x = pars.get("kt_saturation")
     if x is not None and x.get("value") is not None:
