@@ -52,7 +52,7 @@ from .threads import SingleThreadedBLAS
 class DiagnoseOptions:
     """Knobs of :func:`diagnose` (defaults suit a 1 kHz robot-joint recording)."""
 
-    effects: list[str] | None = None          #: candidate effects to test (default: all of EFFECT_NAMES)
+    effects: list[str] | None = None          #: candidate effects to test (default: every candidate of the registry)
     holdout: float = 0.3                      #: fraction of the recording held out (interleaved time blocks)
     holdout_signals: Any = None               #: a separate recording used as the held-out data instead
     cutoff_hz: float | None = None            #: parallel low-pass cut-off (default min(0.1 fs, 100 Hz))
