@@ -25,7 +25,7 @@ SCHEMA_MODULES = ("params.py", "model.py")
 #: file (relative to bldc_actuator/) -> effect-name constants it still holds. MUST ONLY SHRINK, and reach empty:
 #: when you remove literals from a file, lower (or delete) its entry here in the same commit.
 ALLOWED = {
-    "diagnosis/frame/candidates.py": 39,
+    "diagnosis/frame/candidates.py": 3,
     "diagnosis/report/stage.py": 6,
     "diagnosis/steady_state.py": 1,
     "diagnosis/torque_balance.py": 16,

@@ -103,4 +103,13 @@ def to_params(coef, cov, keys, variant, ctx):
             "peak_current": {"value": i_pk, "sd": 0.0, "unit": "A", "field": None}}
 
 
-FORMS = Forms(variants=variants, excited=excited, to_params=to_params)
+def implausible(pars, ctx):
+    """The drop at the recording's peak current between -5 % and 60 % (its bound depends on the recorded current)."""
+    drop, peak = pars.get("saturation_drop_at_peak"), pars.get("peak_current")
+    if drop is None or drop.get("value") is None:
+        return None
+    v = drop["value"]
+    return None if -0.05 <= v <= 0.6 else f"saturation {100 * v:.3g}% at {peak['value']:.3g} A"
+
+
+FORMS = Forms(variants=variants, excited=excited, to_params=to_params, implausible=implausible)

@@ -40,7 +40,7 @@ from __future__ import annotations
 import numpy as np
 
 from .forms import Forms, Single, sd, smooth_sign
-from .record import Effect, Param, Story
+from .record import Bounds, Effect, Param, Story
 
 EFFECT = Effect(
     name="torque_dependent_gear_friction", rank=35,
@@ -57,7 +57,7 @@ EFFECT = Effect(
         "torque_constant_error": "brake as well as drive (decelerate, lower a load): while motoring mu|K i| is a "
                                  "torque-constant error x(1 - mu); a K_t error follows the torque's sign, gear "
                                  "friction the speed's"},
-    params=(Param("gear_load_friction", "", "effects.gear_load_friction"),),
+    params=(Param("gear_load_friction", "1", "effects.gear_load_friction", (Bounds(lo=0.0, lo_sd=3.0),)),),
     story=Story.CURRENT_TREND,
 )
 
