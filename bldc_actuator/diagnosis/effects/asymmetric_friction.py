@@ -1,10 +1,13 @@
 """Direction-dependent friction.
 
-The catalogue record; its regressor columns, excitation test and parameter mapping are attached
-in :mod:`..frame.candidates`."""
+The catalogue record and its regressor forms (``FORMS``: columns, excitation test, parameter mapping)."""
 
 from __future__ import annotations
 
+import math
+
+from .coulomb_friction import NON_NEGATIVE, col_fric_abs, col_fric_sign, excite_friction, params_friction
+from .forms import Forms, Single
 from .record import Effect, Param, Story
 
 EFFECT = Effect(
@@ -14,7 +17,26 @@ EFFECT = Effect(
     confusable={"position_dependent_load": "hold still at several angles, or move in both directions over "
                 "the same angles: a load depends on angle, friction on direction",
                 "coulomb_friction": "move at the same speeds in both directions"},
-    params=(Param("coulomb_friction", "N*m", "effects.coulomb_friction"),
+    params=(Param("coulomb_friction", "N*m", "effects.coulomb_friction", NON_NEGATIVE),
             Param("friction_asymmetry", "N*m", "effects.friction_asymmetry")),
     story=Story.VELOCITY,
 )
+
+
+def directional(pars, ctx):
+    """Dry friction opposes motion in both directions: ``c + a`` (positive motion) and ``c - a`` (negative) are not
+    negative. One that is, beyond 3 sd, is a constant force driving the axis (it needs a holding current at
+    standstill; a constant load names it), not friction."""
+    c, a = pars.get("coulomb_friction", {}), pars.get("friction_asymmetry", {})
+    cv, av = c.get("value"), a.get("value")
+    if not isinstance(cv, (int, float)) or not isinstance(av, (int, float)):
+        return None
+    sd = math.hypot(c.get("sd") or 0.0, a.get("sd") or 0.0)
+    if cv - abs(av) + 3.0 * sd >= 0.0:
+        return None
+    return (f"dry friction {cv - abs(av):.3g} N*m < 0 in one direction (coulomb {cv:.3g}, asymmetry {av:.3g}): a "
+            f"constant force, not friction")
+
+
+FORMS = Forms(Single({"fric_sign": col_fric_sign, "fric_abs": col_fric_abs}), excite_friction, params_friction,
+              implausible=directional)
