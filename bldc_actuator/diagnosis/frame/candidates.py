@@ -24,6 +24,7 @@ import numpy as np
 from ... import effects, frames, kernel
 from ..effects import Effect, Route, Story, registry
 from ..effects.backlash import BACKLASH_EXPERIMENT
+from .clock_noise import inertia_cross
 from ..effects.forms import Forms, Single, Variant, v_single, params_generic
 from ..effects.forms import elec as _elec, flat as _flat, mech as _mech, sd as _sd, smooth_sign as _smooth_sign
 
@@ -130,6 +131,9 @@ def col_kt(equations, kappa: float = 1.0):
 
 def col_inertia(ctx):
     return {"mechanical": ctx.sig["omega_dot"]}
+
+
+col_inertia.cross = inertia_cross   # the noise of samples taken at scattered instants (frame/clock_noise.py)
 
 
 def col_r_err(ctx):

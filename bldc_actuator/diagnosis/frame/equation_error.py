@@ -363,6 +363,10 @@ class Context:
     #: the convention the voltage equation reads the logged voltage with (:func:`voltage_shift`): "command" (computed
     #: from the current sample logged with it), "applied" (held at the sample), None (at its sample, or a frame delay)
     voltage_convention: str | None = None
+    #: [s] per raw sample: how far the instants the samples were taken at scatter around the time axis (white part;
+    #: the cleaning's clock check, ``meta["sampling"]["clock"]``), 0 where none was resolved; noise in the
+    #: derivatives (:mod:`.clock_noise`)
+    instant_scatter: np.ndarray | None = None
     _col_cache: dict = field(default_factory=dict)
     _inst_cache: dict = field(default_factory=dict)
     _cross_cache: dict = field(default_factory=dict)
@@ -402,7 +406,8 @@ class Context:
             if cross is not None:
                 self._cross_cache[key] = cross(self)
             swap = {"i_col": S["i_inst"]} if "i_inst" in S else {}
-            if "a_inst" in S and cross is None:     # a column stating its own cross term keeps the measured motion
+            # a column stating its own cross term keeps the measured motion
+            if "a_inst" in S and (cross is None or not any(self._cross_cache[key].values())):
                 swap.update(omega_dot=S["a_inst"], P=S["P_inst"])
             if swap:
                 kept = {k: S[k] for k in swap if k != "i_col"}
@@ -501,7 +506,7 @@ def prepare(parts: list[tuple[Any, bool]], params: ActuatorParams, *, fc: float 
             holdout: float = 0.3, voltage_timing: str = "auto") -> Context:
     """Concatenate recordings (``(signals, is_holdout_recording)``), fill masks, derive signals, choose
     the filter. With a single recording, the held-out part is chosen by :func:`holdout_mask`."""
-    times, chans, segs, hold, starts = [], {}, [], [], []
+    times, chans, segs, hold, starts, scatter = [], {}, [], [], [], []
     offset, n0 = 0.0, 0
     names: set = set()
     notes: list[str] = []
@@ -524,6 +529,8 @@ def prepare(parts: list[tuple[Any, bool]], params: ActuatorParams, *, fc: float 
         for a, b in seglist:
             segs.append((int(a) + n0, int(b) + n0))
         hold.append(np.full(n, bool(is_ho)))
+        clock = ((getattr(sig, "meta", {}) or {}).get("sampling") or {}).get("clock") or {}
+        scatter.append(np.full(n, float(clock.get("instant_scatter_s") or 0.0)))
         dt = np.median(np.diff(t)) if n > 1 else 1.0
         offset = tt[-1] + 10 * dt
         n0 += n
@@ -570,7 +577,8 @@ def prepare(parts: list[tuple[Any, bool]], params: ActuatorParams, *, fc: float 
         raise ValueError(f"voltage_timing: expected one of {', '.join(VOLTAGE_TIMINGS)}, got {voltage_timing!r}")
     ctx = Context(params=params, t=t, segments=segments, fs=fs, dec=dec, have=set(raw), raw=raw, valid=valid,
                   notes=notes, steady=steady, part_starts=tuple(starts), voltage_timing=voltage_timing,
-                  declared_timing=declared_timing([sig for sig, _ in parts]))
+                  declared_timing=declared_timing([sig for sig, _ in parts]),
+                  instant_scatter=np.concatenate(scatter))
     if len(parts) > 1 and any(h for _, h in parts):
         ctx.holdout_raw = np.concatenate(hold)
     else:
@@ -871,7 +879,9 @@ def _derive(ctx: Context) -> None:
             use_pos = False
             ctx.notes.append(f"d(position)/dt is {ratio:.3g} x the velocity channel: speed taken from the velocity "
                              f"channel; angle-dependent effects use the position as recorded")
+    S["omega_from_position"] = np.array(0.0)
     if use_pos:
+        S["omega_from_position"] = np.array(1.0)
         # central differences of the angle: no delay (a drive's velocity is often a backward difference,
         # half a sample late, which looks like a resistance error in the voltage equation)
         S["omega"] = _gradient(S["theta"], t, segs)
@@ -886,6 +896,7 @@ def _derive(ctx: Context) -> None:
                 # a coarse log: the difference over +-1 sample attenuates the motion band (6 % for a 1 Hz gait
                 # at 10 Hz, several times a resistance change's voltage); an aligned velocity channel does not
                 S["omega"] = raw["velocity"]
+                S["omega_from_position"] = np.array(0.0)
                 ctx.valid["omega"] = ctx.valid["velocity"]
                 f_m = min(MOTION_BAND_HZ, 0.1 * ctx.fs)
                 x = 2 * math.pi * f_m / ctx.fs
