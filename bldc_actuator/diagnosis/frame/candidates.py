@@ -24,7 +24,7 @@ import numpy as np
 from ... import effects, frames, kernel
 from ..effects import Effect, Route, Story, registry
 from ..effects.backlash import BACKLASH_EXPERIMENT
-from .clock_noise import inertia_cross
+from .clock_noise import decimated_cross
 from ..effects.forms import Forms, Single, Variant, v_single, params_generic
 from ..effects.forms import elec as _elec, flat as _flat, mech as _mech, sd as _sd, smooth_sign as _smooth_sign
 
@@ -133,7 +133,7 @@ def col_inertia(ctx):
     return {"mechanical": ctx.sig["omega_dot"]}
 
 
-col_inertia.cross = inertia_cross   # the noise of samples taken at scattered instants (frame/clock_noise.py)
+col_inertia.inertia = True   # its coefficient adds to the inertia the residual's timing noise scales with (clock_noise)
 
 
 def col_r_err(ctx):
@@ -691,6 +691,7 @@ def _compliance_rss(ctx, loc=None):
     from .loop_noise import compensated_solve, filter_cross_of_load
 
     B = ctx.blocks["mechanical"]
+    J = ctx.params.motor.rotor_inertia
     rows = ctx.train_rows("mechanical")
     K = np.broadcast_to(np.asarray(ctx.sig["K"], float), ctx.sig["omega_dot"].shape)
     x = ctx.dec.apply(ctx.sig["omega_dot"] / K)
@@ -719,15 +720,21 @@ def _compliance_rss(ctx, loc=None):
         if not 0.0 < f_a < 0.45 * fs_dec:
             return float("inf"), 0.0, 0.0
         b, a = compliance_filter(f_a, zeta, fs_dec)
-        col = np.zeros_like(x)
         zi = lfilter_zi(b, a)
-        for lo, hi in bounds:
-            col[lo:hi], _ = lfilter(b, a, x[lo:hi], zi=zi * x[lo])
-        X = np.column_stack([clean(col)[rows]] + X0)
+
+        def filt(v):
+            col = np.zeros_like(v)
+            for lo, hi in bounds:
+                col[lo:hi], _ = lfilter(b, a, v[lo:hi], zi=zi * v[lo])
+            return col
+        X = np.column_stack([clean(filt(x))[rows]] + X0)
         G, g = X.T @ X, X.T @ y
         bias = np.zeros(len(g))
+        # the scattered instants' noise the column shares with the target (-J u: frame/clock_noise.py)
+        timing = J * decimated_cross(ctx, lambda u: clean(filt(u)), clean)
+        loop = filter_cross_of_load(ctx, b, a, fs_dec, (sos, fs_dec))
         try:
-            beta, bias[0] = compensated_solve(G, g, 0, filter_cross_of_load(ctx, b, a, fs_dec, (sos, fs_dec)))
+            beta, bias[0] = compensated_solve(G, g, 0, lambda load: loop(load) - timing)
             plain = np.linalg.solve(G, g)
         except np.linalg.LinAlgError:
             return float("inf"), 0.0, 0.0

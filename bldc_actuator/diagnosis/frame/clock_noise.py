@@ -34,12 +34,27 @@ def _impulse_energy(ctx, derivatives: int) -> np.ndarray:
     return y ** 2
 
 
-def acceleration_noise_energy(ctx) -> float:
-    """Expected sum over the mechanical equation's training rows of the squared timing noise in ``omega'/K`` (its
-    column in current units), 0 without a resolved scatter."""
+def acceleration_noise_energy(ctx, rows: np.ndarray | None = None) -> float:
+    """Expected sum over the mechanical equation's training rows (or the decimated ``rows``) of the squared timing
+    noise in ``omega'/K`` (its column in current units), 0 without a resolved scatter."""
+    var = acceleration_noise_variance(ctx)
+    if var is None:
+        return 0.0
+    rows = ctx.train_rows("mechanical") if rows is None else rows
+    return float(var[rows].sum())
+
+
+def acceleration_noise_variance(ctx) -> np.ndarray | None:
+    """Expected variance of the timing noise in ``omega'/K`` per decimated sample (module docstring); None without
+    a resolved scatter."""
     sigma = ctx.instant_scatter
     if sigma is None or not np.any(sigma > 0) or ctx.steady or "omega_dot" not in ctx.sig:
-        return 0.0
+        return None
+    return ctx.memo(("clock_noise_variance",), lambda: _variance(ctx))
+
+
+def _variance(ctx) -> np.ndarray:
+    sigma = ctx.instant_scatter
     S = ctx.sig
     from_angle = float(S.get("omega_from_position", 0.0)) > 0
     slope = S["omega_s"] if from_angle else ctx.dec.lowpass(S["omega_dot"])
@@ -49,33 +64,78 @@ def acceleration_noise_energy(ctx) -> float:
     for lo, hi in ctx.segments:
         if hi - lo > 1:
             var[lo:hi] = np.convolve(w[lo:hi], g2, mode="same")
-    rows = ctx.train_rows("mechanical")
-    return float(var[ctx.dec.idx][rows].sum())
+    return var[ctx.dec.idx]
 
 
-def inertia_cross(ctx) -> dict[str, float]:
-    """``{"mechanical": E[x'e]}`` for the inertia column ``x = omega'``, at the coefficient of its own compensated
-    fit beside the always-fitted nuisance columns (module docstring); 0 without scatter or where the acceleration
-    columns are instrumented."""
-    if "mechanical" not in ctx.blocks or "a_inst" in ctx.sig:
-        return {"mechanical": 0.0}
-    energy = acceleration_noise_energy(ctx)
-    if not energy > 0.0:
-        return {"mechanical": 0.0}
-    from .loop_noise import compensated_solve
+#: noise realizations the cross products of the columns are averaged over (a fixed seed: the same context gives the
+#: same fit)
+DRAWS = 4
+SEED = 24
 
+
+def _realizations(ctx) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``[(u, u_column)]``: realizations of the scattered instants' noise in ``omega'`` at the raw rate and in the
+    inertia column (``u/K`` low-passed and decimated); empty without a resolved scatter."""
+    sigma = ctx.instant_scatter
+    S = ctx.sig
+    if sigma is None or not np.any(sigma > 0) or ctx.steady or "omega_dot" not in S:
+        return []
+    from_angle = float(S.get("omega_from_position", 0.0)) > 0
+    slope = S["omega_s"] if from_angle else ctx.dec.lowpass(S["omega_dot"])
+    rng = np.random.default_rng(SEED)
+    out = []
+    for _ in range(DRAWS):
+        n = sigma * slope * rng.standard_normal(len(slope))   # the angle's (or the speed's) displacement
+        u = np.zeros_like(n)
+        for lo, hi in ctx.segments:
+            if hi - lo >= 3:
+                x = n[lo:hi]
+                for _ in range(2 if from_angle else 1):
+                    x = np.gradient(x, ctx.t[lo:hi])
+                u[lo:hi] = x
+        out.append((u, ctx.dec.apply(u / S["K"])))
+    return out
+
+
+def realizations(ctx) -> list[tuple[np.ndarray, np.ndarray]]:
+    """:func:`_realizations`, once per context."""
+    return ctx.memo(("clock_noise_realizations",), lambda: _realizations(ctx))
+
+
+def column_cross(ctx, rebuild, column: dict[str, np.ndarray]) -> dict[str, float]:
+    """``{"mechanical": E[sum over training rows of c_u u]}``: the timing noise ``c_u`` the mechanical column
+    ``column`` (``rebuild()``: the same column built again from the context's signals as they are then) holds, against the inertia column's own
+    ``u``; per unit of the inertia that multiplies the residual's share (``e = -(J + beta_J) u``). ``c_u`` is the
+    column built with the noise added to the acceleration (and to the nominal motion torque ``P = J omega' + ...``)
+    minus the column, averaged over :data:`DRAWS` realizations. Empty without a resolved scatter."""
+    reals = realizations(ctx)
+    if not reals or "mechanical" not in column or "mechanical" not in ctx.blocks:
+        return {}
+    S = ctx.sig
     J = ctx.params.motor.rotor_inertia
-
-    def cross_of(beta: float) -> float:
-        return -(J + beta) * energy
-
     rows = ctx.train_rows("mechanical")
-    col = ctx.dec.apply(np.nan_to_num(ctx.sig["omega_dot"] / ctx.sig["K"]))[rows]
-    nuis = [ctx.column(k, b).get("mechanical") for k, b in ctx.nuisance.items()]
-    X = np.column_stack([col] + [c[rows] for c in nuis if c is not None])
-    y = ctx.blocks["mechanical"].target[rows]
+    kept = {k: S[k] for k in ("omega_dot", "P") if k in S}
+    total = 0.0
     try:
-        _, bias = compensated_solve(X.T @ X, X.T @ y, 0, cross_of)
-    except np.linalg.LinAlgError:
-        bias = cross_of(0.0)
-    return {"mechanical": bias}
+        for u, u_col in reals:
+            S["omega_dot"] = kept["omega_dot"] + u
+            if "P" in kept:
+                S["P"] = kept["P"] + J * u
+            c = rebuild().get("mechanical")
+            if c is None:
+                return {}
+            total += float((c - column["mechanical"])[rows] @ u_col[rows])
+    finally:
+        S.update(kept)
+    return {"mechanical": total / len(reals)}
+
+
+def decimated_cross(ctx, column_of, target_of) -> float:
+    """``E[sum over the mechanical training rows of column_of(u) target_of(u)]`` over the realizations of the inertia
+    column's timing noise ``u`` (decimated): for a column a search builds from the decimated acceleration with its
+    own filters (``column_of``) against the target as it filters it (``target_of``); 0 without a resolved scatter."""
+    reals = realizations(ctx)
+    if not reals or "mechanical" not in ctx.blocks:
+        return 0.0
+    rows = ctx.train_rows("mechanical")
+    return float(np.mean([column_of(u_col)[rows] @ target_of(u_col)[rows] for _, u_col in reals]))

@@ -370,6 +370,8 @@ class Context:
     _col_cache: dict = field(default_factory=dict)
     _inst_cache: dict = field(default_factory=dict)
     _cross_cache: dict = field(default_factory=dict)
+    _timing_cache: dict = field(default_factory=dict)
+    _inertia_keys: set = field(default_factory=set)
     _memo_cache: dict = field(default_factory=dict)
     _rows_cache: dict = field(default_factory=dict)
 
@@ -419,7 +421,27 @@ class Context:
                     S["i_col"] = S.get("i_q")
                 if any(not np.array_equal(z[eq], out[eq]) for eq in out):
                     self._inst_cache[key] = z
+            if getattr(builder, "inertia", False):
+                self._inertia_keys.add(key)
+            # the scattered instants' noise the column shares with the residual (:mod:`.clock_noise`); a column
+            # instrumented by the lagged acceleration does not share it
+            if not ("omega_dot" in swap and key in self._inst_cache):
+                from .clock_noise import column_cross
+
+                timing = column_cross(self, lambda: self._build(builder), out)
+                if timing:
+                    self._timing_cache[key] = timing
         return self._col_cache[key]
+
+    def timing_cross(self, key) -> dict[str, float]:
+        """Expected ``sum over an equation's training rows of column x u`` for the noise ``u`` of samples taken at
+        scattered instants in the inertia column (:mod:`.clock_noise`): the residual holds ``-(J + beta_J) u``,
+        ``beta_J`` the inertia column's coefficient (:meth:`is_inertia`); empty without a resolved scatter."""
+        return self._timing_cache.get(key, {})
+
+    def is_inertia(self, key) -> bool:
+        """Whether the column ``key`` is the rotor inertia's (its builder says ``inertia = True``)."""
+        return key in self._inertia_keys
 
     def train_rows(self, eq: str) -> np.ndarray:
         hit = self._rows_cache.get(("rows", eq))
@@ -1199,6 +1221,8 @@ def fit_columns(ctx: Context, cols: dict[str, dict[str, np.ndarray]], keys: list
     Xs, Zs, ys, parts = [], [], [], []
     use_iv = False
     bias = np.zeros(len(keys))      # expected Xᵀe of columns correlated with the noise by construction
+    timing = np.zeros(len(keys))    # ... the scattered instants' share, per unit of the inertia (-(J + beta_J) timing)
+    j_inertia = next((j for j, k in enumerate(keys) if ctx.is_inertia(k)), None)
     for eq in blocks:
         B = ctx.blocks[eq]
         rows = ctx.train_rows(eq)
@@ -1209,6 +1233,7 @@ def fit_columns(ctx: Context, cols: dict[str, dict[str, np.ndarray]], keys: list
             c = cols[k].get(eq)
             if c is not None:
                 bias[j] += w * w * float((ctx.cross(k) or {}).get(eq, 0.0))
+                timing[j] += w * w * float(ctx.timing_cross(k).get(eq, 0.0))
                 X[:, j] = ctx.on_train(c, eq)
                 inst = ctx.instrument(k)
                 if inst is not None and inst.get(eq) is not None:
@@ -1227,9 +1252,15 @@ def fit_columns(ctx: Context, cols: dict[str, dict[str, np.ndarray]], keys: list
         scale = np.sqrt((X ** 2).sum(axis=0))
         scale[scale == 0] = 1.0
         Xn, Zn = X / scale, Z / scale
+        A_n = Zn.T @ Xn
+        if timing.any():   # Zᵀ(y - Xβ) = -(J + β_J) timing: the inertia coefficient's share moves to the left
+            J = ctx.params.motor.rotor_inertia
+            bias = bias - J * timing
+            if j_inertia is not None:
+                A_n[:, j_inertia] -= timing / (scale * scale[j_inertia])
         if bias.any():   # bias-compensated: Zᵀ(y - Xβ) = E[Zᵀe]
             use_iv = True
-            beta_n, *_ = np.linalg.lstsq(Zn.T @ Xn, Zn.T @ y - bias / scale, rcond=1e-12)
+            beta_n, *_ = np.linalg.lstsq(A_n, Zn.T @ y - bias / scale, rcond=1e-12)
         elif use_iv:   # instrumental variables: Zᵀ(y - Xβ) = 0
             beta_n, *_ = np.linalg.lstsq(Zn.T @ Xn, Zn.T @ y, rcond=1e-12)
         else:
@@ -1263,7 +1294,7 @@ def fit_columns(ctx: Context, cols: dict[str, dict[str, np.ndarray]], keys: list
         tau = float(np.mean(taus)) if taus else 1.0
         try:
             if use_iv:
-                A = np.linalg.pinv(Zn.T @ Xn)
+                A = np.linalg.pinv(A_n)
                 cov_n = A @ (Zn.T @ Zn) @ A.T * s2 * tau
             else:
                 cov_n = np.linalg.pinv(Xn.T @ Xn) * s2 * tau
