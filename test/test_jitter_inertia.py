@@ -44,8 +44,8 @@ def test_stamps_the_samples_follow_are_kept_and_reported(cleaned):
     np.testing.assert_array_equal(c.time, raw.time)
     (issue,) = _clock_issues(c)
     assert "follow the stamps" in issue.detail
-    # the stamps scatter by the white part and the wander together around a straight line
-    assert clock["stamp_scatter_s"] / clock["period_s"] == pytest.approx(np.hypot(WHITE, WANDER), rel=0.25)
+    # the stamps' white scatter, from their periods (the wander is slow)
+    assert clock["stamp_scatter_s"] / clock["period_s"] == pytest.approx(WHITE, rel=0.2)
     assert clock["on_stamps"]["sigma_s"] < 0.02 / RATE
     assert clock["on_uniform"]["sigma_s"] / clock["period_s"] == pytest.approx(WHITE, rel=0.1)
 
@@ -56,10 +56,12 @@ def test_stamps_that_scatter_around_uniform_samples_are_replaced_by_the_uniform_
     assert clock["follows"] == "uniform"
     (issue,) = _clock_issues(c)
     assert "replaced by the uniform clock" in issue.action
-    assert np.ptp(np.diff(c.time)) < 1e-9
-    assert c.time[1] - c.time[0] == pytest.approx(1.0 / RATE, rel=1e-3)
+    # the clock the stamps' moving average makes: the white scatter of the periods gone
+    assert np.std(np.diff(c.time)) < 0.1 * np.std(np.diff(raw.time))
+    assert np.median(np.diff(c.time)) == pytest.approx(1.0 / RATE, rel=1e-2)
+    assert clock["on_uniform"]["sigma_s"] < 0.02 / RATE
     np.testing.assert_array_equal(c.meta["recorded_time"], raw.time)
-    assert clock["on_stamps"]["sigma_s"] / clock["period_s"] == pytest.approx(WHITE, rel=0.1)
+    assert clock["on_stamps"]["sigma_s"] / clock["period_s"] == pytest.approx(WHITE, rel=0.2)
 
 
 def test_instants_that_scatter_around_counted_stamps_are_measured(cleaned):

@@ -259,7 +259,7 @@ def _clock(ctx: _Ctx, t: np.ndarray, ch: dict, segments) -> tuple[np.ndarray, "c
         return "not measured" if s is None else f"{_g(1e3 * s.sigma_s)} ± {_g(1e3 * s.sd_s)} ms"
 
     if cc.irregular_stamps:
-        head = f"time: the stamps scatter {ms(cc.stamp_scatter_s)} around a uniform clock fitted per segment"
+        head = f"time: the stamps scatter {ms(cc.stamp_scatter_s)} around the uniform clock their moving average makes"
         how = (f"; the {cc.channel} places the samples' instants {sc(cc.on_stamps)} around the stamps and "
                f"{sc(cc.on_uniform)} around the uniform clock (its 4-point interpolation residual against its "
                f"derivative squared)") if cc.channel else ""
@@ -274,7 +274,7 @@ def _clock(ctx: _Ctx, t: np.ndarray, ch: dict, segments) -> tuple[np.ndarray, "c
                       "none: the recorded time axis is kept; derivatives taken on it (filters treat the samples "
                       "as evenly spaced)")
         else:
-            why = "no angle or speed recorded" if cc.channel is None else "the motion cannot tell"
+            why = "no angle recorded" if cc.channel is None else "the motion cannot tell"
             ctx.issue("clock_jitter", "time", len(t), t0,
                       f"{head}; whether the samples follow the stamps or that clock is undecided ({why}){how}",
                       "none: the recorded time axis is kept")
