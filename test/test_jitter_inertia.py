@@ -127,3 +127,19 @@ def test_no_finding_on_the_same_clocks_without_the_inertia_error(stamps):
     rep, _ = _diagnose(stamps, 1.0)
     assert rep["findings"] == [], rep["verdict"]
     assert rep["nothing_missing"], rep["verdict"]
+
+
+def test_the_columns_timing_noise_matches_its_analytic_energy(cleaned):
+    """The inertia column's shared timing noise, from realizations through its builder, against the analytic
+    ``sigma^2 sum_k g(r - k)^2 (omega_k / K)^2`` (g: the impulse response of two central differences and the
+    zero-phase low-pass)."""
+    from bldc_actuator.diagnosis.frame import clock_noise
+    from bldc_actuator.diagnosis.frame import equation_error as ee
+    from bldc_actuator.diagnosis.frame.candidates import col_inertia
+
+    c, _ = cleaned["nominal"]
+    ctx = ee.prepare([(c, False)], NOMINAL)
+    ctx.column("inertia", col_inertia)
+    energy = clock_noise.acceleration_noise_energy(ctx)
+    assert energy > 0
+    assert ctx.timing_cross("inertia")["mechanical"] == pytest.approx(energy, rel=0.05)

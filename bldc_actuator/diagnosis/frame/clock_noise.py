@@ -7,14 +7,17 @@ low-pass keeps a share of it. The equation's target holds the same noise times t
 ...`` on the right), so least squares reads it as an inertia too small by ``E[u'u] / E[x'x]`` (errors in variables:
 1.4 x nominal fitted as 1.34 with 20 % of a 500 Hz period of scatter, 7 standard deviations off).
 
-The expected cross product of the column with the residual, for bias-compensated least squares: at the column's true
-coefficient ``beta`` the residual holds ``-(J + beta) u``, so ``E[x'e] = -(J + beta) sum_r E[u_r^2]`` with
-``E[u_r^2] = sigma^2 sum_k g(r - k)^2 (s_k / K_k)^2``, ``g`` the impulse response of the column's chain (central
-differences on the log's grid, the zero-phase low-pass) and ``s`` the smoothed slope the scatter multiplies (the
-speed for an angle-derived speed, the acceleration for a logged speed). Solved with its coefficient
-(:func:`.loop_noise.compensated_solve`). Where the acceleration columns are instrumented (:mod:`.loop_noise`'s
-loop-fed current noise), the instrument, lagged past the filter's spread, is independent of white timing noise:
-the cross is 0 there."""
+Taken out wherever the acceleration is fitted: at the columns' true coefficients the residual holds
+``-(J + beta_J) u`` (``u`` the noise of the inertia column ``omega'/K``, ``beta_J`` that column's coefficient), so a
+column's expected cross product with it is ``-(J + beta_J) E[c_u' u]``, ``c_u`` the noise the column holds:
+:func:`column_cross` builds it through the column's own builder from :data:`DRAWS` realizations of ``u`` (the
+smoothed slope the scatter multiplies -- the speed for an angle-derived speed, the acceleration for a logged speed --
+times white noise of the measured scatter, through the same central differences), and
+:func:`.equation_error.fit_columns` moves the ``beta_J`` share to the left of its normal equations. The compliance
+search's own fit (:func:`decimated_cross`) and the current alignment's (:func:`acceleration_noise_variance`: the
+expected ``E[u_r^2] = sigma^2 sum_k g(r - k)^2 (s_k / K_k)^2``, ``g`` the chain's impulse response) do the same. A
+column instrumented by the lagged acceleration (:mod:`.loop_noise`'s loop-fed current noise) does not share white
+timing noise: no cross there."""
 
 from __future__ import annotations
 
