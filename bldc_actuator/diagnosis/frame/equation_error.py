@@ -408,8 +408,7 @@ class Context:
             if cross is not None:
                 self._cross_cache[key] = cross(self)
             swap = {"i_col": S["i_inst"]} if "i_inst" in S else {}
-            # a column stating its own cross term keeps the measured motion
-            if "a_inst" in S and (cross is None or not any(self._cross_cache[key].values())):
+            if "a_inst" in S and cross is None:     # a column stating its own cross term keeps the measured motion
                 swap.update(omega_dot=S["a_inst"], P=S["P_inst"])
             if swap:
                 kept = {k: S[k] for k in swap if k != "i_col"}
