@@ -197,7 +197,7 @@ def false_alarm(a) -> int:
             d = root / "demo" / f"run{k + 1}"
             if k == 0:   # the demo runs lock-step (reproducible): one run, copied
                 env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-                env.setdefault("ROS_DOMAIN_ID", "64")
+                env.setdefault("ROS_DOMAIN_ID", "22")
                 subprocess.run([sys.executable, "-m", "bldc_actuator.cli", "demo", "--preset", "ak80_9", "--out",
                                 str(d), "--no-plot"], check=True, env=env, stdout=subprocess.DEVNULL, timeout=600)
             else:

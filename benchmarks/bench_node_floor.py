@@ -130,7 +130,7 @@ def pct(xs: list[float], q: float) -> float:
 def child_env() -> dict:
     env = dict(os.environ)
     env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    env.setdefault("ROS_DOMAIN_ID", "96")
+    env.setdefault("ROS_DOMAIN_ID", "24")   # outside the test suite's domains 40-101
     env.pop("_ROS_WHEELS_BOOTSTRAP_COMPLETE", None)
     return env
 
@@ -140,7 +140,7 @@ def node_command(joints: int, extra: list[str]) -> list[str]:
     ros = ["--ros-args", "-p", f"joints:=[{', '.join(names)}]"]
     for n in names:
         ros += ["-p", f"joint.{n}.preset:=ak80_9"]
-    own = [a for a in extra if a.startswith("--executor")]   # the node's own options go before --ros-args
+    own = [a for a in extra if a.startswith(("--executor", "--record"))]   # the node's own options go before --ros-args
     return [sys.executable, "-c", "import sys; from bldc_actuator.node import main; sys.exit(main(sys.argv))",
             *own, *ros, *[a for a in extra if a not in own]]
 

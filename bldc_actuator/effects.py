@@ -23,6 +23,17 @@ def friction_magnitude(direction, speed, coulomb, asymmetry, stribeck, stribeck_
     return np.maximum(value, 0.0)
 
 
+def gear_load_friction(transmitted_torque, coefficient):
+    """Friction of a gear that grows with the torque it transmits: ``μ |τ_m|`` [N·m] added to the kinetic AND
+    static friction magnitude (:func:`friction_magnitude`), ``τ_m`` = the motor's electromagnetic torque
+    ``K i_q`` [N·m, motor side], ``coefficient`` = μ [-] (dimensionless, the same number at the motor or the
+    output side: both torques scale by the gear ratio). The load-dependent friction of Rhoban's BAM ("Extended
+    friction models for the physics simulation of servo actuators", Duclusaud, Passault et al. 2024, model M3:
+    ``τ_fm = K_c + K_v|ω| + K_l |τ_gearbox|``), with the gear's torque taken as the motor's: see
+    :mod:`bldc_actuator.diagnosis.effects.torque_dependent_gear_friction` for the choice."""
+    return coefficient * np.abs(transmitted_torque)
+
+
 def friction_basis(omega, stribeck_velocity, smoothing_velocity=0.0):
     """Regressor columns of the friction torque for fitting: ``τ_f = basis @ [τ_c, τ_asym, τ_s]``.
 
@@ -117,10 +128,26 @@ def derate_scale(winding_temperature, derate_temperature, trip_temperature):
 
 # -- magnetic saturation ----------------------------------------------------------------------------
 
-def saturation_factor(i_q, k_sat):
-    """K(i_q)/K = max(0.2, 1 - k_sat |i_q|): cross-saturation of the magnet flux by the q-axis current [A]
-    (``k_sat`` [1/A]); the same factor scales torque and back-EMF, so the energy exchange stays consistent."""
-    return np.maximum(1.0 - k_sat * np.abs(i_q), 0.2)
+#: the current the saturation law is read at [A]: K(i) = K (1 - k_sat SAT_REF_CURRENT (|i|/SAT_REF_CURRENT)^n)
+SAT_REF_CURRENT = 1.0
+
+
+def saturation_shape(i_q, n):
+    """The saturation law's shape [A]: ``|i_q| (|i_q| / 1 A)^(n - 1)``, so K(i)/K = 1 - k_sat * shape (before the
+    floor). :func:`saturation_factor` holds the same expression inline (it is compiled for the kernel, which calls
+    no uncompiled helper); the diagnosis's regressor column is built from this one."""
+    a = np.abs(i_q)
+    return a * (np.maximum(a, 1e-300) / SAT_REF_CURRENT) ** (n - 1.0)
+
+
+def saturation_factor(i_q, k_sat, n=1.0):
+    """K(i_q)/K = max(0.2, 1 - k_sat |i_q| (|i_q| / 1 A)^(n - 1)): cross-saturation of the magnet flux by the
+    q-axis current [A], a power law in |i_q| with exponent ``n`` (monotone for n > 0; n = 1 is the linear law
+    ``1 - k_sat |i_q|`` exactly, the factor (|i|/1 A)^0 being 1.0). ``k_sat`` [1/A] is the fractional drop per
+    ampere at 1 A (the drop at a current I is k_sat I (I / 1 A)^(n-1)); the same factor scales torque and
+    back-EMF, so the energy exchange stays consistent."""
+    a = np.abs(i_q)
+    return np.maximum(1.0 - k_sat * a * (np.maximum(a, 1e-300) / SAT_REF_CURRENT) ** (n - 1.0), 0.2)
 
 
 # -- iron loss -------------------------------------------------------------------------------------

@@ -44,8 +44,8 @@ def jit(fn):
 _COEF_SCALARS = (
     "pole_pairs", "R_ref", "L", "K_ref", "J", "b", "T_ref", "alpha", "beta", "N", "V_bus", "V_max", "I_lim",
     "T_c", "Kp", "Ki", "decouple", "T_derate", "T_trip", "T_amb", "R_wh", "R_ha", "C_w", "C_h",
-    "tau_c", "tau_asym", "tau_s", "omega_s", "cog_order", "load0", "load_g", "load_phi", "load_k", "load_k0",
-    "has_alpha", "has_beta", "has_stribeck", "has_friction", "has_position_load", "k_sat",
+    "tau_c", "tau_asym", "tau_s", "omega_s", "mu_gear", "cog_order", "load0", "load_g", "load_phi", "load_k", "load_k0",
+    "has_alpha", "has_beta", "has_stribeck", "has_friction", "has_position_load", "k_sat", "sat_n",
     "fe_h", "fe_e", "sens_off_a", "sens_off_b", "sens_gain_a", "sens_gain_b", "has_sensor_error", "v_dt", "dt_delta",
     "dt_band", "dt_start",
     "v_lim_mode", "I_fw", "R_ctl", "L_ctl", "K_ctl",
@@ -121,6 +121,7 @@ def to_records(arr: np.ndarray) -> list[Record]:
 # -- the optional terms, compiled from effects.py -------------------------------------------------------
 
 _friction_magnitude = jit(effects.friction_magnitude)
+_gear_load_friction = jit(effects.gear_load_friction)
 _cogging_torque_mean = jit(effects.cogging_torque_mean)
 _position_load_torque_out = jit(effects.position_load_torque_out)
 _resistance_at = jit(effects.resistance_at)
@@ -305,7 +306,28 @@ def control_tick(c, s):
 
 
 @jit
-def friction(c, num, den, w0, h):
+def _slide(den, rhs, d, mu, tm0, tm1):
+    """Mean speed ``w`` sliding in direction ``d`` with a gear friction ``μ |τ_m(w)|``, ``τ_m = tm0 + tm1 w``:
+    ``den w = rhs - d μ |tm0 + tm1 w|`` (``rhs`` = num - d F_base) solved exactly, branch by branch of the
+    torque's sign; where neither branch is consistent the torque's zero (friction at its base value). Returns
+    ``(w, μ |τ_m(w)|)``."""
+    if mu == 0.0:
+        return rhs / den, 0.0
+    w_free = rhs / den
+    first = 1.0 if tm0 + tm1 * w_free >= 0.0 else -1.0
+    for k in range(2):
+        sg = first if k == 0 else -first
+        dd = den + d * mu * sg * tm1
+        if dd > 0.0:
+            w = (rhs - d * mu * sg * tm0) / dd
+            if sg * (tm0 + tm1 * w) >= 0.0:
+                return w, mu * abs(tm0 + tm1 * w)
+    w = -tm0 / tm1 if tm1 != 0.0 else w_free
+    return w, 0.0
+
+
+@jit
+def friction(c, num, den, w0, h, tm0=0.0, tm1=0.0):
     """Mean speed ``w`` and friction torque ``τ_f`` (constant over the interval) from the mechanical
     balance ``den·w = num - τ_f`` (implicit midpoint, see :func:`advance`), without a bristle state.
 
@@ -316,16 +338,24 @@ def friction(c, num, den, w0, h):
       the drive exceeds breakaway, slips the other way — friction is then the time-weighted mean of the
       two phases, which keeps the result second-order accurate across step sizes;
     * at rest: stays stuck while the drive torque is within static friction, else breaks away.
+
+    A gear's load-dependent friction (``c.mu_gear`` = μ, :func:`effects.gear_load_friction`) adds ``μ |τ_m|`` to
+    the kinetic and the static level, ``τ_m = tm0 + tm1 w`` the interval-mean electromagnetic torque (affine in
+    the mean speed through the back-EMF): sliding, the balance is solved with it exactly; at rest the breakaway
+    level is ``F_s + μ |tm0|`` (the torque the motor transmits while the rotor stands), so a drive against no
+    load breaks away only beyond ``F_s / (1 - μ)`` (never for μ >= 1: a self-locking gear).
     """
     J2h = 2.0 * c.J / h                       # den = J2h + (b - K B); num = J2h w0 + drive(0)
     d0 = _sign(w0)
+    mu = c.mu_gear
     tau_c = c.tau_c + c.fe_h                  # iron-loss hysteresis drag acts like dry friction
     F_mov = _friction_magnitude(d0, abs(w0), tau_c, c.tau_asym, c.tau_s, c.omega_s)
     if c.has_stribeck != 0.0:
-        w_pred = (num - d0 * F_mov) / den
+        w_pred, _ = _slide(den, num - d0 * F_mov, d0, mu, tm0, tm1)
         w_eval = w_pred if w_pred * w0 > 0.0 else 0.5 * w0
         F_mov = _friction_magnitude(d0, abs(w_eval), tau_c, c.tau_asym, c.tau_s, c.omega_s)
-    w_mov = (num - d0 * F_mov) / den
+    w_mov, F_gear = _slide(den, num - d0 * F_mov, d0, mu, tm0, tm1)
+    F_mov = F_mov + F_gear
     crossed = w0 * (2.0 * w_mov - w0) < 0.0 and F_mov > 0.0
     moving = w0 != 0.0
     if moving and not crossed:                # the common case: sliding on
@@ -334,6 +364,8 @@ def friction(c, num, den, w0, h):
     drive = num - J2h * w0
     push = _sign(drive)
     F_st = _friction_magnitude(push, 0.0, tau_c, c.tau_asym, c.tau_s, c.omega_s)
+    if mu != 0.0:
+        F_st = F_st + _gear_load_friction(tm0, mu)   # the torque transmitted at rest: tau_m(0)
     breaks = abs(drive) > F_st
     if moving:
         if crossed and breaks and push == -d0:
@@ -343,6 +375,12 @@ def friction(c, num, den, w0, h):
             return (num - f_cross) / den, f_cross
         return 0.5 * w0, num - den * 0.5 * w0   # crossed and sticks: ends the interval at rest
     if breaks:
+        if mu != 0.0:                         # sliding off in the push direction, its gear friction solved
+            F_b = F_st - _gear_load_friction(tm0, mu)
+            w_b, F_g = _slide(den, num - push * F_b, push, mu, tm0, tm1)
+            if w_b * push > 0.0:
+                return w_b, push * (F_b + F_g)
+            return 0.0, drive
         return (num - push * F_st) / den, push * F_st
     return 0.0, drive
 
@@ -368,7 +406,7 @@ def spring_energy(c, s):
 
 
 @jit
-def transmission(c, s, num, den, w0, h, tau_L):
+def transmission(c, s, num, den, w0, h, tau_L, tm0=0.0, tm1=0.0):
     """Motor and load speeds over an interval with a compliant transmission (implicit midpoint, like the rigid
     mechanics): the rotor's balance ``den w = num - tau_f - tau_s/N`` (``num``, ``den`` as for a rigid rotor
     without the load) and the load's ``2 J_l (u - omega_l0)/h = tau_s - tau_L``, with the spring torque at the
@@ -401,7 +439,7 @@ def transmission(c, s, num, den, w0, h, tau_L):
         num_c = num - s0 / N
         den_c = den + s1 / N
         if c.has_friction != 0.0:
-            w, tau_f = friction(c, num_c, den_c, w0, h)
+            w, tau_f = friction(c, num_c, den_c, w0, h, tm0, tm1)
         else:
             w = num_c / den_c
             tau_f = 0.0
@@ -472,7 +510,7 @@ def advance(c, s, h_ns):
     R = _resistance_at(c.R_ref, s.T_w, c.T_ref, c.alpha, True) if c.has_alpha != 0.0 else c.R_ref
     K = c.K_ref * _flux_factor(s.T_h, c.T_ref, c.beta, True) if c.has_beta != 0.0 else c.K_ref  # magnet at T_h
     if c.k_sat != 0.0:   # cross-saturation by the q current at the interval start: torque and back-EMF alike
-        K = K * _saturation_factor(i0.imag, c.k_sat)
+        K = K * _saturation_factor(i0.imag, c.k_sat, c.sat_n)
     L, J = c.L, c.J
     # electrical: L di/dt = v - (R + j p w0 L) i - j K ω(t), with the speed ramping linearly over the
     # interval, ω(t) = w0 + r t, r = 2 (w - w0)/h (w = mean speed, found below). Exact solution:
@@ -523,9 +561,9 @@ def advance(c, s, h_ns):
     if s.prescribed:                             # the speed is given: w0 + acc t (a body's, see CoupledSim)
         w, tau_f = w0 + 0.5 * h * s.acc, 0.0
     elif compliant:
-        w, tau_f, u, tau_s, tdamp, de_spring = transmission(c, s, num, den, w0, h, tau_L)
+        w, tau_f, u, tau_s, tdamp, de_spring = transmission(c, s, num, den, w0, h, tau_L, K * A, K * B)
     elif c.has_friction != 0.0:
-        w, tau_f = friction(c, num, den, w0, h)
+        w, tau_f = friction(c, num, den, w0, h, K * A, K * B)   # the motor's torque K (A + B w): the gear's load
     else:
         w = num / den
         tau_f = 0.0

@@ -172,8 +172,9 @@ class _Coeffs:
         self.has_stribeck = bool(np.any(self.tau_s))
         self.fe_h = e("iron_loss_hysteresis")
         self.fe_e = e("iron_loss_eddy")
+        self.mu_gear = e("gear_load_friction")         # friction per N*m the motor transmits to the gear
         self.has_friction = bool(np.any(self.tau_c) or np.any(self.tau_asym) or np.any(self.tau_s)
-                                 or np.any(self.fe_h))
+                                 or np.any(self.fe_h) or np.any(self.mu_gear))
         self.sens_off_a, self.sens_off_b = d("current_sensor_offset_a"), d("current_sensor_offset_b")
         self.sens_gain_a, self.sens_gain_b = d("current_sensor_gain_a"), d("current_sensor_gain_b")
         self.v_dt = d("dead_time") * d("pwm_frequency") * self.V_bus
@@ -197,6 +198,7 @@ class _Coeffs:
         self.load_k0 = ld("spring_zero")
         self.has_position_load = bool(np.any(self.load_g) or np.any(self.load_k))
         self.k_sat = e("kt_saturation")
+        self.sat_n = e("kt_saturation_exponent")
         g = lambda name: col(lambda p: getattr(p.gear, name))  # noqa: E731
         # transmission (output side); gear.transmission_stiffness = 0 means rigid (the kernel's rigid path)
         self.k_tr = g("transmission_stiffness")
@@ -761,7 +763,7 @@ def _torque_constant_q(c: _Coeffs, i_q, T_h):
     formula behind ``torque_em``/``effort_out`` of :meth:`Actuator.outputs` and :meth:`Actuator.joint_state`."""
     K = c.K_ref * effects.flux_factor(T_h, c.T_ref, c.beta)
     if c.batch or c.k_sat:
-        K = K * (effects.saturation_factor if c.batch else kernel._saturation_factor)(i_q, c.k_sat)  # noqa: SLF001
+        K = K * (effects.saturation_factor if c.batch else kernel._saturation_factor)(i_q, c.k_sat, c.sat_n)  # noqa: SLF001
     return K
 
 

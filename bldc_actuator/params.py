@@ -215,7 +215,8 @@ class EffectsParams:
     """Optional physics terms, all off (zero) by default. Torques are at the MOTOR side.
 
     Friction: ``τ_f = sign(ω)·[τ_c + sign(ω)·τ_asym + τ_s·exp(-(ω/ω_s)^2)]`` with static friction
-    ``τ_c + τ_s`` (+asymmetry) at rest (stick-slip handled by the integrator, no bristle state).
+    ``τ_c + τ_s`` (+asymmetry) at rest (stick-slip handled by the integrator, no bristle state); a geared
+    actuator's load-dependent friction adds ``μ |K i_q|`` to both (``gear_load_friction``).
     Cogging: ``τ_cog = Σ_k a_k cos(k N_c θ) + b_k sin(k N_c θ)``.
     """
 
@@ -224,6 +225,9 @@ class EffectsParams:
                                    "subtracted for omega < 0", -100.0, 100.0)
     stribeck_friction: float = _p(0.0, "N*m", "tau_s: extra static friction decaying with speed", 0.0, 100.0)
     stribeck_velocity: float = _p(0.1, "rad/s", "omega_s: Stribeck velocity", 0.0, 1e4, lo_open=True)
+    gear_load_friction: float = _p(0.0, "1", "mu: gear friction growing with the transmitted torque, kinetic and "
+                                   "static friction + mu |K i_q| (the motor's electromagnetic torque; BAM's K_l); "
+                                   ">= 1 is a self-locking gear", 0.0, 2.0)
     cogging_order: int = _p(0, "", "N_c: cogging periods per mechanical revolution (lcm(slots, 2p)); 0 = off",
                             0, 10000)
     cogging_cos: tuple = _p((), "N*m", "a_k: cosine amplitudes of harmonics k = 1..n of N_c theta")
@@ -232,8 +236,11 @@ class EffectsParams:
                                      "its heat goes into the winding node", 0.0, 100.0)
     iron_loss_eddy: float = _p(0.0, "N*m*s/rad", "c_e: eddy-current iron-loss drag c_e omega (power c_e omega^2), "
                                "its heat goes into the winding node", 0.0, 100.0)
-    kt_saturation: float = _p(0.0, "1/A", "k_sat: magnetic saturation, K(i_q) = K (1 - k_sat |i_q|) (floored at "
-                              "0.2 K) in torque and back-EMF alike", 0.0, 1.0)
+    kt_saturation: float = _p(0.0, "1/A", "k_sat: magnetic saturation, K(i_q) = K (1 - k_sat |i_q| (|i_q| / 1 A)^(n-1)) "
+                              "(floored at 0.2 K) in torque and back-EMF alike: the fractional drop per ampere at "
+                              "1 A (n = 1: K (1 - k_sat |i_q|))", 0.0, 1.0)
+    kt_saturation_exponent: float = _p(1.0, "1", "n: exponent of the saturation law in |i_q| (1 = linear; real "
+                                       "curves 0.5..4)", 0.5, 4.0, limits=(0.0, 16.0, True))
 
 
 @dataclass(frozen=True)

@@ -23,10 +23,12 @@ SCENARIO = textwrap.dedent('''
     p = load_preset("ak80_9").replace(**{
         "effects.coulomb_friction": 0.03, "effects.friction_asymmetry": 0.005, "effects.stribeck_friction": 0.02,
         "effects.stribeck_velocity": 2.0, "effects.cogging_order": 42, "effects.cogging_cos": (0.01, 0.002),
-        "effects.cogging_sin": (0.004, 0.0), "load.gravity_torque": 1.5, "load.spring_stiffness": 0.3,
+        "effects.cogging_sin": (0.004, 0.0), "effects.gear_load_friction": 0.25, "load.gravity_torque": 1.5,
+        "load.spring_stiffness": 0.3,
         "motor.resistance_temperature_enabled": True, "motor.magnet_temperature_enabled": True,
         "motor.magnet_temperature_coefficient": -0.0012, "drive.derate_temperature": 30.0,
-        "drive.trip_temperature": 32.0, "thermal.winding_heat_capacity": 2.0})
+        "drive.trip_temperature": 32.0, "thermal.winding_heat_capacity": 2.0,
+        "effects.kt_saturation": 0.004, "effects.kt_saturation_exponent": 1.5})
     act = Actuator(p)
     rows = []
     for k in range(3000):                       # 3 s: chirp into the voltage limit, reversals, heating, derating

@@ -445,6 +445,58 @@ def test_kt_saturation_steady_torque_balance_and_energy():
     assert plain.state.omega / act.state.omega == pytest.approx(1 / (1 - k * i_cmd), rel=1e-6)
 
 
+@pytest.mark.parametrize("n", [0.5, 1.5, 3.0])
+def test_kt_saturation_power_law_steady_speed_and_energy(n):
+    """effects.kt_saturation_exponent n: K(i_q) = K (1 - k |i_q| (|i_q|/1 A)^(n-1)). A law falling 15 % at
+    12 A (k = 0.15 / 12^n per A^(n-1)): at a constant 12 A with viscous damping only the steady speed is
+    0.85 K i / b (analytic, both torque and back-EMF use the same factor) and the energy ledger closes."""
+    i_cmd = 12.0
+    k = 0.15 / i_cmd ** n * 1.0                                   # drop at 12 A = k 12 (12/1 A)^(n-1) = 0.15
+    p = ActuatorParams().replace(**{"effects.kt_saturation": k, "effects.kt_saturation_exponent": n,
+                                    "motor.viscous_damping": 2e-2, "motor.resistance_temperature_enabled": False})
+    act = Actuator(p)
+    e0 = act.energy
+    act.set_current_command(i_cmd)
+    act.step(1.0)
+    K, b = p.motor.torque_constant_q, p.motor.viscous_damping
+    assert act.state.omega == pytest.approx(0.85 * K * i_cmd / b, rel=1e-6)
+    assert act.outputs()["torque_em"] == pytest.approx(0.85 * K * i_cmd, rel=1e-6)
+    # the electrical equation at steady state: v_q = R i + K(i) omega (p omega L i_d with i_d = 0)
+    R = p.motor.phase_resistance
+    assert act.state.v_q == pytest.approx(R * i_cmd + 0.85 * K * act.state.omega, rel=1e-5)
+    e1 = act.energy
+    assert abs(e1.residual(e0)) < 1e-6 * e1.electrical_in
+
+
+def test_kt_saturation_exponent_one_is_the_linear_law_bit_for_bit():
+    """n = 1 (the default) is today's K (1 - k |i_q|) exactly: the factor equals the linear expression to the
+    last bit at every current (0 included), and a whole current-step run with n = 1 written explicitly equals
+    the default run sample for sample; n = 1.5 differs (the exponent reaches the kernel)."""
+    from bldc_actuator import effects
+
+    i = np.concatenate([[0.0, -0.0, 1e-320], np.linspace(-40.0, 40.0, 2001)])
+    for k in (0.0, 0.003, 0.015, 0.2):
+        assert np.array_equal(effects.saturation_factor(i, k, 1.0), np.maximum(1.0 - k * np.abs(i), 0.2))
+        assert np.array_equal(effects.saturation_factor(i, k), np.maximum(1.0 - k * np.abs(i), 0.2))
+    assert np.all(np.isfinite(effects.saturation_factor(i, 0.01, 0.5)))
+    assert effects.saturation_factor(0.0, 0.01, 0.5) == 1.0
+
+    def run(**extra):
+        p = ActuatorParams().replace(**{"effects.kt_saturation": 0.015, "motor.viscous_damping": 0.02, **extra})
+        act = Actuator(p)
+        out = []
+        for k in range(1200):
+            act.set_current_command(12.0 if (k // 300) % 2 else -7.0)
+            act.step(1e-3)
+            s = act.state
+            out.append((s.i_q, s.omega, s.theta, s.v_q, act.outputs()["torque_em"]))
+        return np.array(out)
+
+    base = run()
+    assert np.array_equal(run(**{"effects.kt_saturation_exponent": 1.0}), base)
+    assert np.abs(run(**{"effects.kt_saturation_exponent": 1.5}) - base)[:, 1].max() > 1.0
+
+
 def test_iron_loss_drag_and_heat():
     """effects.iron_loss_eddy c_e and iron_loss_hysteresis tau_h: drag c_e omega + tau_h sign(omega), and their
     power heats the winding node. Steady speed at a constant current is (K i - tau_h) / (b + c_e) (analytic);

@@ -158,6 +158,8 @@ EXTRACTORS = {
     "stribeck_friction": lambda p, n: _get(p, "stribeck_friction", "tau_s"),
     "friction_asymmetry": lambda p, n: _get(p, "friction_asymmetry", "asymmetry", "tau_asym"),
     "viscous_damping": lambda p, n: _get(p, "viscous_damping", "b", "viscous"),
+    # the fractional torque-constant drop at the peak current (a power-law saturation finding reports it)
+    "a_sat_power_law": lambda p, n: _get(p, "saturation_drop_at_peak"),
     "cogging_amplitude": _cogging_amplitude,
     "ripple_current_q": _ripple,
     "gravity_torque": lambda p, n: (abs(v) if (v := _get(p, "gravity_torque", "tau_g")) is not None else None),

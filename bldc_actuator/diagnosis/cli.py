@@ -4,6 +4,11 @@
                            [--map CANONICAL=EXPR ...] [--map-file F]
                            --json REPORT.json --report DIR [--updated-params OUT.yaml]
                            [--effects a,b] [--holdout FRACTION | --holdout-file F]
+                           [--mujoco-model ROBOT.xml [--joint-map REC=MJCF,...]]
+
+``--mujoco-model``: a multi-joint file diagnosed as one robot (:mod:`.body.robot`): the body's torque on every
+joint from the MJCF's inverse dynamics is each joint's known load, the body's mass errors are findings, and the
+report has a section per joint (``--json``: one JSON; ``--report``: report.md plus a directory per joint).
 
 Exit status: 0 when the diagnosis ran (whatever it found), 2 on bad input (the message names the file,
 field or option).
@@ -39,7 +44,8 @@ def register(subparsers) -> None:
     p.add_argument("--json", metavar="REPORT.json", help="write the JSON report here")
     p.add_argument("--report", metavar="DIR", help="write report.md and PNG plots into DIR")
     p.add_argument("--updated-params", metavar="OUT.yaml",
-                   help="write the parameter file with the accepted effects fitted")
+                   help="write the parameter file with the accepted effects fitted (with --mujoco-model: one per "
+                        "joint, OUT.<joint>.yaml)")
     p.add_argument("--effects", metavar="a,b", help="test only these candidate effects (comma-separated)")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--holdout", type=float, default=0.3, metavar="FRACTION",
@@ -69,6 +75,13 @@ def register(subparsers) -> None:
                         "what the recording declares (this project's MCAP and CSV files do), else 'command' where the "
                         "log shows that pairing's noise signature, else 'sample'")
     p.add_argument("--window", type=float, default=0.1, metavar="S", help="replay window length (default 0.1 s)")
+    p.add_argument("--mujoco-model", metavar="ROBOT.xml",
+                   help="diagnose every joint of a multi-joint file as one robot against this MJCF model: the body's "
+                        "torque on each joint (mujoco.mj_inverse over the recorded motion) is its known load, and a "
+                        "body's mass error (a link, a payload) is a finding (fixed-base robots)")
+    p.add_argument("--joint-map", action="append", default=[], metavar="REC=MJCF,...",
+                   help="with --mujoco-model: the MJCF joint of a recorded joint whose name differs, e.g. "
+                        "joint1=shoulder_yaw,joint2=elbow (repeatable)")
     p.add_argument("--no-plots", action="store_true", help="Markdown report without PNGs")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.set_defaults(func=run)
@@ -127,6 +140,10 @@ def run(args) -> int:
         if path is not None and not Path(path).exists():
             return _fail(f"{path}: no such file")
     progress = not args.quiet
+    if args.mujoco_model:
+        return _run_robot(args, params, mapping, effects, progress)
+    if args.joint_map:
+        return _fail("--joint-map: applies with --mujoco-model only")
     try:
         if progress:
             print(f"[diagnose] loading {args.recording}", file=sys.stderr, flush=True)
@@ -154,6 +171,59 @@ def run(args) -> int:
     if args.updated_params and report.updated_params is not None:
         report.write_params(args.updated_params)
     _print_summary(report, args)
+    return 0
+
+
+def _run_robot(args, params, mapping, effects, progress) -> int:
+    from .body.joints import parse_joint_map
+    from .body.robot import diagnose_robot_file
+    from .pipeline import DiagnoseOptions
+
+    if params is None:
+        return _fail("--params recording: not with --mujoco-model yet; give a parameter file or a preset")
+    if args.joint is not None:
+        return _fail("--joint: not with --mujoco-model (the robot is diagnosed whole)")
+    if args.holdout_file:
+        return _fail("--holdout-file: not with --mujoco-model yet; use --holdout")
+    if not Path(args.mujoco_model).exists():
+        return _fail(f"--mujoco-model {args.mujoco_model}: no such file")
+    try:
+        joint_map = parse_joint_map(args.joint_map)
+        options = DiagnoseOptions(effects=effects, holdout=args.holdout, cutoff_hz=args.cutoff, window_s=args.window,
+                                  progress=progress, tolerance=args.tolerance,
+                                  max_relative_uncertainty=args.max_uncertainty, simulation_gate=args.simulation_gate,
+                                  voltage_timing=args.voltage_timing)
+        if progress:
+            print(f"[diagnose] robot: {args.recording} against {args.mujoco_model}", file=sys.stderr, flush=True)
+        report = diagnose_robot_file(args.recording, params, args.mujoco_model, joint_map=joint_map,
+                                     profile=args.profile, mapping=mapping, options=options)
+    except (ValueError, OSError) as exc:
+        return _fail(str(exc))
+    if args.json:
+        report.write_json(args.json)
+    if args.report:
+        report.write_markdown(args.report, plots=not args.no_plots)
+    written = []
+    if args.updated_params:        # one parameter file per joint: OUT.yaml -> OUT.<joint>.yaml
+        out = Path(args.updated_params)
+        for j, r in report.joints.items():
+            if r.updated_params is not None:
+                path = out.with_name(f"{out.stem}.{j}{out.suffix or '.yaml'}")
+                r.write_params(path)
+                written.append(str(path))
+    for f in report.body.findings:
+        print(f"body: {f.sentence()}")
+    if not report.body.findings:
+        print("body: nothing missing in the mass properties")
+    for f in report.body.rejected:
+        print(f"  body, not accepted: {f.body} {f.delta_mass:+.3g} kg: {f.reason}")
+    for j, r in report.joints.items():
+        print(f"{j}: {r.verdict}")
+    for name, path in (("json", args.json), ("report", args.report and str(Path(args.report) / "report.md"))):
+        if path:
+            print(f"  wrote {name}: {path}")
+    for path in written:
+        print(f"  wrote updated params: {path}")
     return 0
 
 

@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 from ..params import ActuatorParams
-from .frame import candidates as cands
+from .effects import registry
 from .report.document import DiagnosisReport
 from .frame.selection import GateConfig
 from .fit import stage as refit
@@ -52,7 +52,7 @@ from .threads import SingleThreadedBLAS
 class DiagnoseOptions:
     """Knobs of :func:`diagnose` (defaults suit a 1 kHz robot-joint recording)."""
 
-    effects: list[str] | None = None          #: candidate effects to test (default: all of EFFECT_NAMES)
+    effects: list[str] | None = None          #: candidate effects to test (default: every candidate of the registry)
     holdout: float = 0.3                      #: fraction of the recording held out (interleaved time blocks)
     holdout_signals: Any = None               #: a separate recording used as the held-out data instead
     cutoff_hz: float | None = None            #: parallel low-pass cut-off (default min(0.1 fs, 100 Hz))
@@ -69,7 +69,7 @@ class DiagnoseOptions:
     voltage_timing: str = "auto"
 
     def validated_effects(self) -> list[str]:
-        names = list(cands.EFFECT_NAMES)
+        names = list(registry.names(registry.candidates()))   # read now: a plug-in effect counts
         if self.effects is None:
             return names
         bad = [e for e in self.effects if e not in names]
@@ -124,7 +124,8 @@ def _voltage_mode(signals, params: ActuatorParams, options: DiagnoseOptions) -> 
     t_start = time.perf_counter()
     say(f"1/6 prepare: voltage and motion logged, no current: the voltage-mode route ({len(signals.time)} samples)")
     res = voltage_mode.diagnose(signals, params, holdout=options.holdout, tolerance=options.tolerance,
-                                max_relative_uncertainty=options.max_relative_uncertainty)
+                                max_relative_uncertainty=options.max_relative_uncertainty,
+                                holdout_signals=options.holdout_signals)
     say(f"4/6 attribute: accepted {[f.effect for f in res.findings] or 'nothing'}")
     return voltage_mode.report(signals, params, res, options, say, t_start)
 

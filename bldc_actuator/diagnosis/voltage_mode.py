@@ -5,10 +5,12 @@ A DC motor (or a BLDC in voltage mode, its q-axis equivalent) driven by a voltag
 the voltage, i = (v - K ω)/R, lagged by the electrical time constant τ_e = L/R where the sampling resolves it
 (τ_e ≥ 0.1 sample: i = LP_τe[(v - K ω)/R], a first-order lag, else the static form), so on the motor side::
 
-    J dω/dt = (K/R) v_f - (K²/R + b) ω_f - τ_c sign(ω) - τ_0
+    J dω/dt = (K/R) v_f - (K²/R + b) ω_f - (τ_c + μ |τ_m|) sign(ω) - τ_0,    τ_m = (K/R)(v_f - K ω_f)
 
 (K the q-axis torque constant ``motor.torque_constant_q`` = back-EMF constant, R ``motor.phase_resistance``, b
-``motor.viscous_damping``, τ_c ``effects.coulomb_friction``, J ``motor.rotor_inertia``, τ_0 a constant torque:
+``motor.viscous_damping``, τ_c ``effects.coulomb_friction``, μ ``effects.gear_load_friction`` (a gear friction
+growing with the motor's torque τ_m, :mod:`.effects.torque_dependent_gear_friction`; its column is built from the
+current the voltage gives, at the fitted K/R), J ``motor.rotor_inertia``, τ_0 a constant torque:
 a load, a voltage offset; ``_f`` the lagged columns). Without current the equation is homogeneous: the data fix
 the ratios to J, so with J nominal three COMBINATIONS are identifiable — K/R, K²/R + b and τ_c — and, free of J,
 their ratios: the effective back-EMF constant (K²/R + b)/(K/R) = K + b R/K [V*s/rad] and the break-away
@@ -30,6 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .effects import torque_dependent_gear_friction as gear_friction
 from .frame.least_squares import ols
 from .signals import Signals, fill_gaps
 from .torque_balance import Term
@@ -96,7 +99,7 @@ class VoltageModeResult:
     simulation: dict             #: nominal vs updated held-out replay (speed RMS) and the judge's channel
     electrical_lag: bool
     n_fit: int = 0
-    coefficients: dict = field(default_factory=dict)   #: the final model: k_over_r, damping, coulomb, offset
+    coefficients: dict = field(default_factory=dict)   #: the final model: k_over_r, damping, coulomb, gear, offset
 
     def to_dict(self) -> dict:
         def t(x: Term) -> dict:
@@ -228,12 +231,16 @@ def _blocks(n: int, frac: float, nblocks: int = 10) -> np.ndarray:
 
 def simulate_speed(J: float, k_over_r: float, damping: float, coulomb: float, offset: float,
                    v: np.ndarray, dt: np.ndarray, w0: np.ndarray, substeps: int = SUBSTEPS, *,
-                   theta0: np.ndarray | None = None, load=None) -> np.ndarray:
+                   theta0: np.ndarray | None = None, load=None, gear_mu: float = 0.0,
+                   back_emf: float = 0.0) -> np.ndarray:
     """Motor-side speed of J dω/dt = (K/R) v - (K²/R + b) ω - τ_c sign(ω) - τ_0 under the voltage ``v``
     (windows x samples, linear between samples) from ``w0`` (per window), ``dt`` the sample intervals (windows x
     samples-1). Each sub-interval exactly (the voltage held at its midpoint); a speed crossing zero stops there
     and sticks while |(K/R) v - τ_0| <= τ_c. ``load(theta)``: a motor-side load torque of the motor angle
-    (from ``theta0``), held over each sub-interval."""
+    (from ``theta0``), held over each sub-interval. ``gear_mu`` = μ: the friction level grows by μ |τ_m|, τ_m =
+    (K/R)(v - K_e ω) the motor's torque (``back_emf`` = K_e [V*s/rad]); within a sub-interval τ_m keeps the sign
+    it has at its start, so the term is affine in ω and solved exactly with the rest; at rest the breakaway level
+    is τ_c + μ |(K/R) v| (:func:`bldc_actuator.kernel.friction`'s rule)."""
     v = np.atleast_2d(v)
     m, k = v.shape
     out = np.empty((m, k))
@@ -250,10 +257,21 @@ def simulate_speed(J: float, k_over_r: float, damping: float, coulomb: float, of
                 drive = drive - load(th)
             moving = w != 0.0
             sgn = np.where(moving, np.sign(w), np.sign(drive))
-            stuck = ~moving & (np.abs(drive) <= coulomb)
-            u = drive - coulomb * sgn
-            w_inf = u / max(damping, 1e-300)
-            e = np.exp(-lam * h)
+            if gear_mu:
+                v_mid = (1 - f) * v[:, j] + f * v[:, j + 1]
+                sig_m = np.sign(k_over_r * (v_mid - back_emf * w))
+                sig_m = np.where(sig_m == 0.0, 1.0, sig_m)
+                # friction sgn (c + mu sig_m kr (v - K_e w)): its speed part joins the damping
+                stuck = ~moving & (np.abs(drive) <= coulomb + gear_mu * np.abs(k_over_r * v_mid))
+                u = drive - sgn * (coulomb + gear_mu * sig_m * k_over_r * v_mid)
+                dmp = np.maximum(damping - sgn * gear_mu * sig_m * k_over_r * back_emf, 1e-9 * max(damping, 1e-300))
+                w_inf = u / dmp
+                e = np.exp(-dmp / J * h)
+            else:
+                stuck = ~moving & (np.abs(drive) <= coulomb)
+                u = drive - coulomb * sgn
+                w_inf = u / max(damping, 1e-300)
+                e = np.exp(-lam * h)
             w_new = w_inf + (w - w_inf) * e
             crossed = moving & (np.sign(w_new) != np.sign(w)) & (coulomb > 0)
             w_next = np.where(stuck | crossed, 0.0, w_new)
@@ -280,7 +298,8 @@ def _windows(c: _Columns, test: np.ndarray, rows: np.ndarray, length: int) -> li
     return out
 
 
-def _replay(c: _Columns, wins: list[np.ndarray], J: float, coef: dict, rest=None, gear: float = 1.0) -> np.ndarray:
+def _replay(c: _Columns, wins: list[np.ndarray], J: float, coef: dict, rest=None, gear: float = 1.0,
+            back_emf: float = 0.0) -> np.ndarray:
     """Per-window RMS of the replayed speed against the logged one [rad/s]."""
     if not wins:
         return np.zeros(0)
@@ -293,7 +312,8 @@ def _replay(c: _Columns, wins: list[np.ndarray], J: float, coef: dict, rest=None
             return (out + (rest(tho) if rest is not None else 0.0)) / gear
     sim = simulate_speed(J, coef["k_over_r"], coef["damping"], max(0.0, coef["coulomb"]), coef["offset"],
                          c.v_raw[W], np.diff(c.t[W], axis=1), c.w[W[:, 0]],
-                         theta0=c.th[W[:, 0]] if c.th is not None else None, load=load)
+                         theta0=c.th[W[:, 0]] if c.th is not None else None, load=load,
+                         gear_mu=max(0.0, coef.get("gear", 0.0)), back_emf=back_emf)
     return np.sqrt(np.mean((sim - c.w_raw[W]) ** 2, axis=1))
 
 
@@ -318,22 +338,39 @@ def _gravity(a: float, b: float, cov: np.ndarray, idx: dict) -> tuple[float, flo
 
 
 COULOMB_FIELD = "effects.coulomb_friction"   #: the parameter-file field of the Coulomb friction (its name there)
+GEAR_FIELD = "effects.gear_load_friction"     #: the field of the gear friction growing with the transmitted torque
 
 #: the combinations: key -> (parameter name, unit, what it is)
 COMBINATIONS = {
     "k_over_r": ("torque_constant_over_resistance", "N*m/V", "K_t/R: torque per volt at standstill"),
     "damping": ("back_emf_plus_viscous", "N*m*s/rad", "K_t*K_e/R + b: the speed's damping (back-EMF and viscous)"),
     "coulomb": (COULOMB_FIELD.rsplit(".", 1)[-1], "N*m", "tau_c: Coulomb friction at the motor side"),
+    "gear": (GEAR_FIELD.rsplit(".", 1)[-1], "", "mu: gear friction per N*m the motor transmits, "
+             "(tau_c + mu |K_t i|) sign(omega)"),
 }
 
 
+def _join(sig: Signals, other: Signals) -> tuple[Signals, int]:
+    """``sig`` with a second recording appended as segments of their own (its time shifted past sig's end by a
+    second: no interval or window spans the two), and the number of sig's samples."""
+    n1, n2 = len(sig.time), len(other.time)
+    t2 = other.time - (other.time[0] if n2 else 0.0) + (sig.time[-1] + 1.0 if n1 else 0.0)
+    names = set(sig.channels) | set(other.channels)
+    nan = lambda k: np.full(k, np.nan)  # noqa: E731
+    ch = {k: np.concatenate([sig.channels.get(k, nan(n1)), other.channels.get(k, nan(n2))]) for k in names}
+    segs = list(sig.segments or [(0, n1)]) + [(a + n1, b + n1) for a, b in (other.segments or [(0, n2)])]
+    return Signals(np.concatenate([sig.time, t2]), ch, source=sig.source, segments=segs, meta=dict(sig.meta)), n1
+
+
 def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0.05,
-             max_relative_uncertainty: float = 0.5) -> VoltageModeResult:
+             max_relative_uncertainty: float = 0.5, holdout_signals: Signals | None = None) -> VoltageModeResult:
+    """The route on ``sig``; the held-out data are interleaved blocks of it (a fraction ``holdout``) or, given,
+    the separate recording ``holdout_signals`` (every sample of ``sig`` then fits, every one of it judges)."""
     m, e = params.motor, params.effects
     K, R, J = float(m.torque_constant_q), float(m.phase_resistance), float(m.rotor_inertia)
     tau_e = float(m.q_inductance) / R
     nominal = {"k_over_r": K / R, "damping": K * K / R + float(m.viscous_damping),
-               "coulomb": float(e.coulomb_friction), "offset": 0.0}
+               "coulomb": float(e.coulomb_friction), "offset": 0.0, "gear": float(e.gear_load_friction)}
     N = float(sig.meta.get("gear_ratio") or params.gear.gear_ratio)
     ld = params.load
     nominal["load_sin"] = float(ld.gravity_torque) * math.cos(float(ld.gravity_phase))
@@ -342,6 +379,9 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
     def rest(tho):          # the nominal load's other parts at the output (constant, spring) [N*m]
         return float(ld.load_torque) + float(ld.spring_stiffness) * (tho - float(ld.spring_zero))
 
+    n_train = None
+    if holdout_signals is not None and len(holdout_signals.time):
+        sig, n_train = _join(sig, holdout_signals)
     c, lagged, how = _columns(sig, tau_e)
     notes = [f"no current sensor: the mechanical equation closed by the voltage, i = (v - K ω)/R"
              + (f" lagged by L/R = {1e3 * tau_e:.3g} ms (resolved by the sampling)" if lagged else
@@ -364,12 +404,30 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
         return empty
     sgn = -cols["coulomb"]
     both_ways = min(np.mean(sgn > 0), np.mean(sgn < 0)) > 0.05
+    # the gear friction's column, -sign(ω) |τ_m|, τ_m = (K/R)(v - K ω) the motor's torque from the voltage, at the
+    # K/R the data give (a fixed point: the free fit of every combination, twice)
+    v_emf = cols["k_over_r"] + K * cols["damping"]         # <v> - K <ω>: the winding's voltage drop R i
+    kr_hat = nominal["k_over_r"]
+    for _ in range(3):
+        cols["gear"] = cols["coulomb"] * np.abs(kr_hat * v_emf)
+        X = np.column_stack([cols[k] for k in cols])
+        y0 = J * dw - sum(nominal[k] * cols[k] for k in cols if k != "offset")
+        if c.th is not None:
+            y0 = y0 + mean(rest(c.th / N)) / N
+        co = np.linalg.lstsq(X, y0, rcond=None)[0]
+        kr_new = nominal["k_over_r"] + float(co[list(cols).index("k_over_r")])
+        if not (kr_new > 0 and math.isfinite(kr_new)) or abs(kr_new - kr_hat) <= 1e-6 * abs(kr_hat):
+            break
+        kr_hat = kr_new
+    braking = float(np.mean(np.sign(v_emf) * sgn < 0))
     notes.append(f"{n} intervals of {c.m} sample(s) fitted (the equation integrated over each: no differentiated "
                  f"speed); intervals touching standstill (|ω| <= {w_eps:.3g} rad/s) or a reversal left out")
     base = J * dw - sum(nominal[k] * cols[k] for k in cols if k != "offset")
     if c.th is not None:
         base = base + mean(rest(c.th / N)) / N
-    test = _blocks(n, holdout)
+    test = _blocks(n, holdout) if n_train is None else starts >= n_train
+    every = np.ones(n, bool) if n_train is None else ~test     # what the BIC and the final fit see
+    n_fit = int(every.sum())
     train = ~test
 
     def keys(free):
@@ -385,11 +443,18 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
         return float(np.sqrt(np.mean((base[test] - pred) ** 2)))
 
     def rss(free):
-        return float(np.sum(fit(free, np.ones(n, bool))[2] ** 2))
+        return float(np.sum(fit(free, every)[2] ** 2))
 
     # forward selection of the freed combinations (the constant torque is always free: a nuisance)
     free = ["offset"]
     terms = ["k_over_r", "damping"] + (["coulomb"] if both_ways else [])
+    if both_ways and braking >= gear_friction.MIN_BRAKING:
+        terms.append("gear")
+    else:
+        notes.append("a gear friction growing with the torque is not tested: " + (
+            "motion in one direction only" if not both_ways else
+            f"the motor brakes in {100 * braking:.1f} % of the intervals (< {100 * gear_friction.MIN_BRAKING:g} %): "
+            f"while motoring it is the K_t/R column (experiment: decelerate it, lower a load)"))
     span_out = float(np.ptp(c.th[rows])) / N if c.th is not None and len(rows) else 0.0
     if span_out >= MIN_LOAD_SPAN:
         terms.append("load")
@@ -404,7 +469,8 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
     left = list(terms)
     while left:
         r0 = rss(free)
-        trials = {k: _bic(r0, n, len(keys(free))) - _bic(rss(free + [k]), n, len(keys(free + [k]))) for k in left}
+        trials = {k: _bic(r0, n_fit, len(keys(free))) - _bic(rss(free + [k]), n_fit, len(keys(free + [k])))
+                  for k in left}
         k = max(trials, key=trials.get)
         before, after = heldout(free), heldout(free + [k])
         if trials[k] > BIC_GATE and after < before:
@@ -418,7 +484,7 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
 
     # the identified combinations: every coefficient free (what the data say, with their uncertainties)
     all_free = ["offset"] + terms
-    coef_all, cov_all, _ = fit(all_free, np.ones(n, bool))
+    coef_all, cov_all, _ = fit(all_free, every)
     ia = {k: i for i, k in enumerate(keys(all_free))}
 
     def val(k):
@@ -470,7 +536,7 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
                                    "what": "phi_g", "identifiable": "identified (independent of J)"}
 
     # the final model and its uncertainties
-    coef, cov, _ = fit(free, np.ones(n, bool))
+    coef, cov, _ = fit(free, every)
     idx = {k: i for i, k in enumerate(keys(free))}
     final = dict(nominal)
     for k in keys(free):
@@ -479,11 +545,11 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
     # judge: the held-out windows replayed under the recorded voltage, leave one out
     dt_med = float(np.median(np.diff(sig.time))) if len(sig.time) > 1 else 1.0
     length = max(8, int(round(WINDOW_S / dt_med)))
-    test_all = _blocks(len(rows), holdout)
+    test_all = _blocks(len(rows), holdout) if n_train is None else rows >= n_train
     wins = _windows(c, test_all, rows, length)
     base_coef = dict(nominal, offset=final["offset"])
-    err_final = _replay(c, wins, J, final, rest, N)
-    err_nom = _replay(c, wins, J, base_coef, rest, N)
+    err_final = _replay(c, wins, J, final, rest, N, K)
+    err_nom = _replay(c, wins, J, base_coef, rest, N, K)
     sim = {"channel": "the route's own mechanical ODE under the recorded voltage (frame.simulate has no "
                       "voltage-commanded DC drive)", "windows": len(wins), "window_s": length * dt_med,
            "metric": "speed error RMS", "unit": "rad/s",
@@ -491,7 +557,7 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
            "updated": float(np.sqrt(np.mean(err_final ** 2))) if len(wins) else None}
 
     fields = {"k_over_r": "motor.phase_resistance", "damping": "motor.viscous_damping",
-              "coulomb": COULOMB_FIELD, "load": "load.gravity_torque"}
+              "coulomb": COULOMB_FIELD, "load": "load.gravity_torque", "gear": GEAR_FIELD}
     findings, rejected = [], []
     for k in terms:
         effect = effect_for(fields[k])
@@ -520,7 +586,7 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
             un["phase_resistance_given_nominal_K"] = "ohm"
         ho = {"metric": "torque_rms", "unit": "N*m", "before": before, "after": after}
         without = dict(final, **{kk: nominal[kk] for kk in TERM_COLUMNS.get(k, (k,))})
-        err_wo = _replay(c, wins, J, without, rest, N)
+        err_wo = _replay(c, wins, J, without, rest, N, K)
         d = err_wo ** 2 - err_final ** 2
         se = float(np.std(d, ddof=1) / math.sqrt(len(d))) if len(d) >= 3 else float("nan")
         simrec = {"metric": "speed error RMS", "unit": "rad/s", "windows": len(d),
@@ -530,76 +596,38 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
         moved, ref = ((par["viscous_damping_given_nominal_K"], float(m.viscous_damping)) if k == "damping"
                       else (value, float(ld.gravity_torque)) if k == "load" else (value, nominal[k]))
         rel = abs(moved - ref) / abs(ref) if ref else math.inf
+        what = "it"
+        if k == "gear":
+            # an additive friction term: its practical size is its share of the friction it joins, mu |tau_m|
+            # against tau_c + mu |tau_m| over the fitted intervals (the nominal mu's share for a change of mu)
+            tm = float(np.mean(np.abs(final["k_over_r"] * v_emf[every])))
+            total = max(final["coulomb"], 0.0) + max(value, 0.0) * tm
+            rel = abs(value - nominal["gear"]) * tm / total if total > 0 else math.inf
+            what = "the friction"
         reason = ""
         if not (len(d) >= 3 and np.mean(d) > 2 * se):
             reason = (f"not confirmed by the held-out replay ({len(d)} windows: speed error RMS without it "
                       f"{simrec['without']:.4g}, with it {simrec['with']:.4g} rad/s)" if len(d) else
                       "no held-out window to replay")
         elif rel <= tolerance:
-            reason = f"consistent with nominal (changes it by {100 * rel:.1f} % <= {100 * tolerance:g} %)"
+            reason = f"consistent with nominal (changes {what} by {100 * rel:.1f} % <= {100 * tolerance:g} %)"
         elif not (abs(s) <= max_relative_uncertainty * abs(value)):
             reason = f"suspected, not identifiable (sd {s:.3g} > {max_relative_uncertainty:g} x |{value:.3g}|)"
         term = Term(effect, par, unc, un, ho, float(dbic), not reason, reason, simrec)
         (rejected if reason else findings).append(term)
-    outside = _torque_dependent_friction(cols, base, keys(free), final, K, n, test, train, nominal["k_over_r"])
-    if outside is not None:
-        combos["torque_dependent_friction"] = outside
-        kr_with = outside["k_over_r_with_it"]
-        if kr_with is not None:
-            notes.append(f"while motoring a torque-dependent friction is the same column as K_t/R (it lowers the "
-                         f"fitted K_t/R by 1 - mu); with it, K_t/R = {kr_with[0]:.4g} ± {kr_with[1]:.2g} N*m/V "
-                         f"(nominal {nominal['k_over_r']:.4g}): told apart only where the motor brakes")
-            if abs(kr_with[0] - nominal["k_over_r"]) <= max(tolerance * nominal["k_over_r"], 3 * kr_with[1]):
-                kr_effect = effect_for(fields["k_over_r"])
-                for f in [f for f in findings if f.effect == kr_effect]:
-                    findings.remove(f)
-                    f.accepted = False
-                    f.reason = ("explained by the torque-dependent friction (K_t/R with it is consistent with "
-                                "nominal): the two are one column while motoring")
-                    rejected.append(f)
-        notes.append(f"outside the catalogue: a friction growing with the transmitted torque (gear friction), "
-                     f"mu = {outside['value']:.3g} ± {outside['sd']:.2g} of |K_t i| (dBIC {outside['delta_bic']:.0f}, "
-                     f"held-out torque RMS {outside['held_out_before']:.3g} -> {outside['held_out_after']:.3g} N*m); "
-                     f"not written to the parameter file (the model has no such term)")
     if combos["viscous_damping"]["value"] < -3 * combos["viscous_damping"]["sd"]:
         notes.append("the damping fitted is below K_t^2/R of the nominal K_t: K_t or R nominal is off (without "
                      "current they are not separated)")
     return VoltageModeResult(findings, rejected, combos, notes,
                              {"metric": "torque_rms", "unit": "N*m", "nominal": heldout(["offset"]),
                               "after": heldout(free)}, sim, lagged, n,
-                             {k: final[k] for k in ("k_over_r", "damping", "coulomb", "offset", "load_sin", "load_cos")})
-
-
-def _torque_dependent_friction(cols, base, free_keys, final, K, n, test, train, nominal_kr) -> dict | None:
-    """A friction that grows with the transmitted torque, μ |K i| sign(ω) (the gear's load-dependent friction,
-    which no catalogued effect holds), tested on top of the final model: its column from the final model's
-    electromagnetic torque; reported when ΔBIC > the gate and the held-out equation error improves."""
-    tau_em = final["k_over_r"] * (cols["k_over_r"] + K * cols["damping"])      # K i = (K/R)(v - K ω)
-    col = cols["coulomb"] * np.abs(tau_em)
-    X0 = np.column_stack([cols[k] for k in free_keys])
-    X1 = np.column_stack([X0, col])
-    out = []
-    for X in (X0, X1):
-        c_, cov_, r_ = ols(X, base)
-        ct, _, _ = ols(X[train], base[train])
-        out.append((c_, cov_, float(r_ @ r_), float(np.sqrt(np.mean((base[test] - X[test] @ ct) ** 2)))))
-    dbic = _bic(out[0][2], n, X0.shape[1]) - _bic(out[1][2], n, X1.shape[1])
-    if not (dbic > BIC_GATE and out[1][3] < out[0][3]):
-        return None
-    mu, var = float(out[1][0][-1]), float(out[1][1][-1, -1])
-    kr = None
-    if "k_over_r" in free_keys:
-        i = free_keys.index("k_over_r")
-        kr = (nominal_kr + float(out[1][0][i]), float(math.sqrt(max(out[1][1][i, i], 0.0))))
-    return {"k_over_r_with_it": kr, "value": mu, "sd": math.sqrt(var) if var >= 0 else float("nan"), "unit": "", "nominal": 0.0,
-            "what": "mu: friction per newton-metre transmitted, mu |K_t i| sign(omega) (outside the catalogue)",
-            "identifiable": "identified (independent of J)", "delta_bic": float(dbic),
-            "held_out_before": out[0][3], "held_out_after": out[1][3]}
+                             {k: final[k] for k in ("k_over_r", "damping", "coulomb", "gear", "offset", "load_sin",
+                                                       "load_cos")})
 
 
 def updated_params(params, result: VoltageModeResult):
-    """The parameters with the accepted combinations written in: Coulomb friction; the viscous damping given
-    K_t nominal; R given K_t nominal."""
+    """The parameters with the accepted combinations written in: Coulomb friction; the gear friction; the
+    viscous damping given K_t nominal; R given K_t nominal."""
     upd = {}
     for f in result.findings:
         p = f.parameters
@@ -610,6 +638,9 @@ def updated_params(params, result: VoltageModeResult):
             upd["motor.viscous_damping"] = max(0.0, p["viscous_damping_given_nominal_K"])
         if "phase_resistance_given_nominal_K" in p and p["phase_resistance_given_nominal_K"] > 0:
             upd["motor.phase_resistance"] = p["phase_resistance_given_nominal_K"]
+        gear = GEAR_FIELD.rsplit(".", 1)[-1]
+        if gear in p:
+            upd[GEAR_FIELD] = max(0.0, p[gear])
         if "gravity_torque" in p:
             upd["load.gravity_torque"] = p["gravity_torque"]
             upd["load.gravity_phase"] = p["gravity_phase"]
@@ -641,12 +672,6 @@ def report(signals, params, res: VoltageModeResult, options, say, t_start: float
                  "heldout_gain": (x.held_out.get("before") or 0) - (x.held_out.get("after") or 0)}
                 for x in res.rejected]
     reasons = [] if res.held_out else [Undecidable("too_few_samples", "; ".join(res.notes[-1:]), "record longer")]
-    tdf = res.combinations.get("torque_dependent_friction")
-    if tdf is not None:
-        reasons.append(Undecidable("outside_catalogue",
-                                   f"a friction growing with the transmitted torque (mu = {tdf['value']:.3g} ± "
-                                   f"{tdf['sd']:.2g}) is outside the catalogue",
-                                   "model the gear's load-dependent friction (mu |tau| sign(omega))"))
     rec = decide([f["effect"] for f in findings], reasons)
     notes = [f"data: {n}" for n in ((getattr(signals, "meta", None) or {}).get("notes") or [])] + list(res.notes)
     for name, cmb in res.combinations.items():
@@ -670,7 +695,8 @@ def report(signals, params, res: VoltageModeResult, options, say, t_start: float
         updated_params=updated_params(params, res), nominal_params=params, timing=timing,
         method="voltage mode (no current sensor)",
         setup={"rate_hz": (getattr(signals, "meta", {}) or {}).get("rate_hz"), "samples": int(len(signals.time)),
-               "holdout": f"{options.holdout:g} of the samples (interleaved blocks)",
+               "holdout": ("separate recording" if getattr(options, "holdout_signals", None) is not None else
+                           f"{options.holdout:g} of the samples (interleaved blocks)"),
                "effects_tested": [effect_for(f) for f in ("motor.phase_resistance", "motor.viscous_damping",
-                                                           "effects.coulomb_friction", "load.gravity_torque")],
+                                                           COULOMB_FIELD, GEAR_FIELD, "load.gravity_torque")],
                "source": getattr(signals, "source", "")})

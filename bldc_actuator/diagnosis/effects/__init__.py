@@ -2,6 +2,6 @@
 :class:`~.record.Effect`; :mod:`.registry` is how the rest of the diagnosis knows them. See docs/effects.md."""
 
 from . import registry
-from .record import Effect, Param, Route, Story, WriteBack
+from .record import Bounds, Effect, Param, Route, Story, WriteBack
 
-__all__ = ["Effect", "Param", "Route", "Story", "WriteBack", "registry"]
+__all__ = ["Bounds", "Effect", "Param", "Route", "Story", "WriteBack", "registry"]

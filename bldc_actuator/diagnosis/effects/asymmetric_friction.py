@@ -1,10 +1,11 @@
 """Direction-dependent friction.
 
-The catalogue record; its regressor columns, excitation test and parameter mapping are attached
-in :mod:`..frame.candidates`."""
+The catalogue record and its regressor forms (``FORMS``: columns, excitation test, parameter mapping)."""
 
 from __future__ import annotations
 
+from .coulomb_friction import NON_NEGATIVE, col_fric_abs, col_fric_sign, excite_friction, params_friction
+from .forms import Forms, Single
 from .record import Effect, Param, Story
 
 EFFECT = Effect(
@@ -14,7 +15,10 @@ EFFECT = Effect(
     confusable={"position_dependent_load": "hold still at several angles, or move in both directions over "
                 "the same angles: a load depends on angle, friction on direction",
                 "coulomb_friction": "move at the same speeds in both directions"},
-    params=(Param("coulomb_friction", "N*m", "effects.coulomb_friction"),
+    params=(Param("coulomb_friction", "N*m", "effects.coulomb_friction", NON_NEGATIVE),
             Param("friction_asymmetry", "N*m", "effects.friction_asymmetry")),
     story=Story.VELOCITY,
 )
+
+
+FORMS = Forms(Single({"fric_sign": col_fric_sign, "fric_abs": col_fric_abs}), excite_friction, params_friction)

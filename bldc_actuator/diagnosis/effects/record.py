@@ -11,6 +11,9 @@ may import it (``test/test_import_graph.py``).
 from __future__ import annotations
 
 import enum
+import functools
+import math
+import numbers
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Mapping
@@ -29,6 +32,9 @@ class Route(enum.Enum):
     #: found by the torque-balance route (a measured torque and motion, no motor current: diagnosis.torque_balance)
     #: from the torque alone, never a candidate of the full route
     TORQUE_BALANCE = "torque_balance"
+    #: a parameter of the robot's multibody model (a link or payload mass), found by the robot route
+    #: (diagnosis.body) jointly over every joint from the MJCF's inverse dynamics, never a per-joint candidate
+    BODY = "body"
 
 
 class Story(enum.Enum):
@@ -54,13 +60,54 @@ class WriteBack(enum.Enum):
 
 
 @dataclass(frozen=True)
+class Bounds:
+    """The physically plausible range of a fitted parameter: a fit outside it explains noise, not physics, and is
+    refused (:func:`..frame.candidates.implausible`). ``[lo, hi]`` in the parameter's unit, or in multiples of a
+    nominal value (``nominal``: its dotted path in ActuatorParams, e.g. ``"motor.rotor_inertia"``)."""
+
+    lo: float = -math.inf
+    hi: float = math.inf
+    nominal: str | None = None
+    #: standard deviations the value may lie below ``lo`` (negative: it must clear ``lo`` by that many)
+    lo_sd: float = 0.0
+    #: the reason's words for the parameter (default: its name)
+    label: str | None = None
+
+    def violation(self, param: "Param", value, sd, params) -> str | None:
+        """Why ``value`` (± ``sd``) is implausible under ``params`` (the nominal ActuatorParams), or None; a
+        non-numeric value (a frame factor's name) is not bounded."""
+        if not isinstance(value, numbers.Real) or isinstance(value, bool):
+            return None
+        v, s = float(value), float(sd or 0.0)
+        slack = self.lo_sd * s if self.lo_sd else 0.0     # an unknown sd (NaN) fails a bound that counts it
+        what = self.label or param.name
+        unit = f" {param.unit}" if param.unit else ""
+        if self.nominal is not None:
+            nom = float(functools.reduce(getattr, self.nominal.split("."), params))
+            lo, hi = self.lo * nom, self.hi * nom
+            if lo - slack <= v <= hi:
+                return None
+            if math.isinf(self.lo) and v > hi:
+                return f"{what} {v:.3g}{unit} above {self.hi:g} x nominal {nom:.3g} ({self.nominal})"
+            return f"{what} {v:.3g} outside [{self.lo:g}, {self.hi:g}] x nominal {nom:.3g} ({self.nominal})"
+        if self.lo - slack <= v <= self.hi:
+            return None
+        if self.lo_sd < 0 and not v >= self.lo - slack:
+            return f"{what} {v:.3g} ± {s:.2g}{unit} not above {self.lo:g}"
+        if math.isinf(self.hi):
+            return f"{what} {v:.3g}{unit} < {self.lo:g}"
+        return f"{what} {v:.3g}{unit} outside [{self.lo:g}, {self.hi:g}]"
+
+
+@dataclass(frozen=True)
 class Param:
-    """One fitted parameter of an effect: its name in the report, SI unit, and the parameter-file field it is
-    written to (None: reported, not written)."""
+    """One fitted parameter of an effect: its name in the report, SI unit, the parameter-file field it is
+    written to (None: reported, not written), and its plausible range (a fit outside any is refused)."""
 
     name: str
     unit: str
     field: str | None = None
+    bounds: tuple[Bounds, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -71,7 +118,7 @@ class Effect:
     name: str                                   #: identifier (the JSON report's ``effect``)
     rank: int                                   #: catalogue order (the order effects are tried and listed)
     description: str                            #: plain words: what physics this is
-    equations: tuple[str, ...]                  #: "mechanical" | "electrical" | "tracking" | "thermal" | "torque_balance"
+    equations: tuple[str, ...]                  #: "mechanical" | "electrical" | "tracking" | "thermal" | "torque_balance" | "body"
     needs: tuple[str, ...]                      #: recorded channels ("a|b" = either)
     simulated: bool                             #: has a simulator term (parameters in the schema)
     route: Route = Route.LINEAR
@@ -119,7 +166,7 @@ class Effect:
     def candidate(self) -> bool:
         """One of the candidate effects a run tests (``--effects``, frame.candidates.library); the drive's own form
         is identified by the pipeline in every run instead, a torque-balance finding by that route."""
-        return self.route not in (Route.DRIVE_FORM, Route.TORQUE_BALANCE)
+        return self.route not in (Route.DRIVE_FORM, Route.TORQUE_BALANCE, Route.BODY)
 
     @property
     def special(self) -> bool:

@@ -3,13 +3,16 @@
 Every module of this package except :mod:`.record` and this one is an effect module holding ``EFFECT``; they are
 found by name (:func:`pkgutil.iter_modules`), so adding an effect is adding one file (docs/effects.md). Lookups
 by name (:func:`get`), in catalogue order (:func:`all`, :func:`names`) and by facet (:func:`where`,
-:func:`by_param`, :func:`by_field`, :func:`torque_scale`, :func:`one`)."""
+:func:`by_param`, :func:`by_field`, :func:`torque_scale`, :func:`one`). :func:`add_path` lets the registry find
+effect modules in a directory outside the package too (a plug-in file, written exactly as a module of this package)."""
 
 from __future__ import annotations
 
 import functools
 import importlib
+import os
 import pkgutil
+import sys
 from typing import Callable, Iterable
 
 from .forms import Forms
@@ -47,6 +50,38 @@ def _catalogue() -> dict[str, Effect]:
         dup = sorted({r for r in ranks if ranks.count(r) > 1})
         raise ValueError(f"effect ranks must be unique, repeated: {dup}")
     return {e.name: e for e in found}
+
+
+def add_path(path) -> None:
+    """Find effect modules in the directory ``path`` as well: each ``<effect>.py`` there is read as a module of this
+    package (its relative imports, ``from .record import Effect``, ``from .forms import Forms``, work as in the
+    package), beside the package's own. The catalogue is read again; a duplicate name or rank is an error then."""
+    from . import __path__ as here
+
+    d = os.fspath(path)
+    if not os.path.isdir(d):
+        raise NotADirectoryError(f"effect plug-in path: expected a directory of effect modules, got {d!r}")
+    if d not in here:
+        here.append(d)
+    _reset()
+
+
+def remove_path(path) -> None:
+    """Stop finding effect modules in ``path`` (:func:`add_path`); the catalogue is read again."""
+    from . import __path__ as here, __name__ as pkg
+
+    d = os.fspath(path)
+    if d in here:
+        here.remove(d)
+        for name in [m for m, mod in sys.modules.items() if m.startswith(pkg + ".")
+                     and os.path.dirname(getattr(mod, "__file__", "") or "") == d]:
+            del sys.modules[name]
+    _reset()
+
+
+def _reset() -> None:
+    _catalogue.cache_clear()
+    _FORMS.clear()
 
 
 def all() -> tuple[Effect, ...]:  # noqa: A001 - the registry's own vocabulary (effects.registry.all())

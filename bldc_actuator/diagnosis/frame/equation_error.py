@@ -317,6 +317,21 @@ class CommandReplay:
                 "errors": self.errors, "score": self.score, "noise_floor": self.noise_floor, "windows": self.windows}
 
 
+@dataclass(frozen=True)
+class FrameTools:
+    """The frame's fitting functions an effect's forms call through ``ctx.tools``: the effects package
+    (:mod:`..effects.forms`) imports nothing of the frame (``test/test_import_graph.py``)."""
+
+    fit_columns: Callable            #: :func:`fit_columns`
+    delta_bic: Callable              #: :func:`delta_bic`
+    heldout_comparison: Callable     #: :func:`heldout_comparison`
+    robust_std: Callable             #: :func:`robust_std`
+    compensated_solve: Callable      #: :func:`.loop_noise.compensated_solve`
+    filter_cross_of_load: Callable   #: :func:`.loop_noise.filter_cross_of_load`
+    voltage_rate_cross: Callable     #: :func:`.loop_noise.voltage_rate_cross`
+    decimated_cross: Callable        #: :func:`.clock_noise.decimated_cross`
+
+
 @dataclass
 class Context:
     """A recording brought into the model's frame at the raw rate, plus its decimation.
@@ -374,6 +389,15 @@ class Context:
     _inertia_keys: set = field(default_factory=set)
     _memo_cache: dict = field(default_factory=dict)
     _rows_cache: dict = field(default_factory=dict)
+
+    @property
+    def tools(self) -> FrameTools:
+        """The frame's fitting functions, for the effect modules' forms (:class:`FrameTools`)."""
+        from .clock_noise import decimated_cross
+        from .loop_noise import compensated_solve, filter_cross_of_load, voltage_rate_cross
+
+        return FrameTools(fit_columns, delta_bic, heldout_comparison, robust_std, compensated_solve,
+                          filter_cross_of_load, voltage_rate_cross, decimated_cross)
 
     # decimated helpers
     @property
@@ -1102,8 +1126,10 @@ def _build_blocks(ctx: Context) -> None:
     ones = np.ones(n, bool)
     if "i_q" in S and "omega" in S:
         w, ws = S["omega"], S["omega_s"]
-        tau_f = effects.friction_basis(ws, e.stribeck_velocity, ctx.omega_eps) @ np.array(
-            [e.coulomb_friction, e.friction_asymmetry, e.stribeck_friction])
+        basis = effects.friction_basis(ws, e.stribeck_velocity, ctx.omega_eps)
+        tau_f = basis @ np.array([e.coulomb_friction, e.friction_asymmetry, e.stribeck_friction])
+        if e.gear_load_friction:     # the gear's friction grows with the motor's torque K i_q
+            tau_f = tau_f + basis[:, 0] * effects.gear_load_friction(S["K"] * S["i_q"], e.gear_load_friction)
         tau_cog = effects.cogging_torque(S["theta"], e.cogging_order, e.cogging_cos, e.cogging_sin) \
             if e.cogging_order and len(e.cogging_cos) else np.zeros(n)
         if "torque" in have:

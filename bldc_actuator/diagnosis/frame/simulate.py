@@ -390,7 +390,7 @@ def _simulate_current_driven(ctx: Context, param_sets: list[ActuatorParams], sta
         i_q = ctx.dec.lowpass(i_q)
         K = m.torque_constant_q * effects.flux_factor(S["T_h"], m.reference_temperature,
                                                       m.magnet_temperature_coefficient, m.magnet_temperature_enabled)
-        K = K * effects.saturation_factor(i_q, p.effects.kt_saturation)
+        K = K * effects.saturation_factor(i_q, p.effects.kt_saturation, p.effects.kt_saturation_exponent)
         tau_out = K * i_q * p.gear.gear_ratio                      # the motor's torque at the output
         drive_torque.append(tau_out - (ext if ext is not None else 0.0))
         plist.append(mechanical_replay_params(p))
@@ -590,7 +590,8 @@ def window_start(plist: list[ActuatorParams], i_d_meas, i_q_meas, omega, theta, 
                                   m.copper_temperature_coefficient, m.resistance_temperature_enabled)
         Kc = m.torque_constant_q * effects.flux_factor(float(T_h[c]), m.reference_temperature,
                                                        m.magnet_temperature_coefficient, m.magnet_temperature_enabled)
-        Kc = float(Kc * effects.saturation_factor(i_q[c], p.effects.kt_saturation))
+        Kc = float(Kc * effects.saturation_factor(i_q[c], p.effects.kt_saturation,
+                                                  p.effects.kt_saturation_exponent))
         w = float(omega[c])
         i = complex(i_d[c], i_q[c])
         v_plant = (R + 1j * m.pole_pairs * w * m.q_inductance) * i + 1j * Kc * w
