@@ -43,9 +43,11 @@ CANONICAL: dict[str, tuple[str, str]] = {
 COMMAND_CHANNELS = ("current_command", "torque_command")
 
 #: DataIssue kinds. The first nine are the contract; ``sign_convention`` (a channel's sign disagrees with
-#: the reference channel) and ``wrapped`` (an angle that wraps around) were added for the real data.
+#: the reference channel) and ``wrapped`` (an angle that wraps around) were added for the real data, ``clock_jitter``
+#: (stamps that scatter around the samples' clock, or samples that scatter around their stamps: ``io/clock.py``) for
+#: a logger's odd clock.
 ISSUE_KINDS = ("outlier", "gap", "duplicate_time", "non_monotonic_time", "unit_suspect", "constant", "nan",
-               "clipped", "missing_channel", "sign_convention", "wrapped")
+               "clipped", "missing_channel", "sign_convention", "wrapped", "clock_jitter")
 
 
 @dataclass

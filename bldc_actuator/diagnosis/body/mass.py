@@ -25,6 +25,8 @@ from typing import Any
 import numpy as np
 
 from ..effects import Route, registry
+from ..effects.coulomb_friction import col_fric_sign
+from ..effects.viscous_friction import col_viscous
 from ..frame import candidates as cands
 from ..frame import equation_error as ee
 from ..frame.selection import GateConfig
@@ -36,7 +38,7 @@ EFFECT = registry.one(lambda e: e.route is Route.BODY)
 PER_JOINT_LOAD = registry.by_field("load.gravity_torque")[0]
 
 #: always fitted on every joint (cheap, never aliased with a body's mass)
-_NUISANCE = (("coulomb", cands.col_fric_sign), ("viscous", cands.col_viscous), ("const", cands.col_load("const")))
+_NUISANCE = (("coulomb", col_fric_sign), ("viscous", col_viscous), ("const", cands.col_load("const")))
 
 
 def _scale_columns(ctx, qdd_s: np.ndarray, tau_raw: np.ndarray, tau_s: np.ndarray) -> dict[str, np.ndarray]:

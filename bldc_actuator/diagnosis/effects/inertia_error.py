@@ -25,6 +25,9 @@ def col_inertia(ctx):
     return {"mechanical": ctx.sig["omega_dot"]}
 
 
+col_inertia.inertia = True   # its coefficient adds to the inertia the residual's timing noise scales with (clock_noise)
+
+
 def excite_inertia(ctx):
     a = ctx.dsig("omega_dot")
     return None if np.std(a) > 0 else "needs acceleration"

@@ -255,6 +255,7 @@ def _compliance_rss(ctx, loc=None):
     compensated_solve, filter_cross_of_load = ctx.tools.compensated_solve, ctx.tools.filter_cross_of_load
 
     B = ctx.blocks["mechanical"]
+    J = ctx.params.motor.rotor_inertia
     rows = ctx.train_rows("mechanical")
     K = np.broadcast_to(np.asarray(ctx.sig["K"], float), ctx.sig["omega_dot"].shape)
     x = ctx.dec.apply(ctx.sig["omega_dot"] / K)
@@ -283,15 +284,21 @@ def _compliance_rss(ctx, loc=None):
         if not 0.0 < f_a < 0.45 * fs_dec:
             return float("inf"), 0.0, 0.0
         b, a = compliance_filter(f_a, zeta, fs_dec)
-        col = np.zeros_like(x)
         zi = lfilter_zi(b, a)
-        for lo, hi in bounds:
-            col[lo:hi], _ = lfilter(b, a, x[lo:hi], zi=zi * x[lo])
-        X = np.column_stack([clean(col)[rows]] + X0)
+
+        def filt(v):
+            col = np.zeros_like(v)
+            for lo, hi in bounds:
+                col[lo:hi], _ = lfilter(b, a, v[lo:hi], zi=zi * v[lo])
+            return col
+        X = np.column_stack([clean(filt(x))[rows]] + X0)
         G, g = X.T @ X, X.T @ y
         bias = np.zeros(len(g))
+        # the scattered instants' noise the column shares with the target (-J u: frame/clock_noise.py)
+        timing = J * ctx.tools.decimated_cross(ctx, lambda u: clean(filt(u)), clean)
+        loop = filter_cross_of_load(ctx, b, a, fs_dec, (sos, fs_dec))
         try:
-            beta, bias[0] = compensated_solve(G, g, 0, filter_cross_of_load(ctx, b, a, fs_dec, (sos, fs_dec)))
+            beta, bias[0] = compensated_solve(G, g, 0, lambda load: loop(load) - timing)
             plain = np.linalg.solve(G, g)
         except np.linalg.LinAlgError:
             return float("inf"), 0.0, 0.0

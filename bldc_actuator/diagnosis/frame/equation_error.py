@@ -329,6 +329,7 @@ class FrameTools:
     compensated_solve: Callable      #: :func:`.loop_noise.compensated_solve`
     filter_cross_of_load: Callable   #: :func:`.loop_noise.filter_cross_of_load`
     voltage_rate_cross: Callable     #: :func:`.loop_noise.voltage_rate_cross`
+    decimated_cross: Callable        #: :func:`.clock_noise.decimated_cross`
 
 
 @dataclass
@@ -377,19 +378,26 @@ class Context:
     #: the convention the voltage equation reads the logged voltage with (:func:`voltage_shift`): "command" (computed
     #: from the current sample logged with it), "applied" (held at the sample), None (at its sample, or a frame delay)
     voltage_convention: str | None = None
+    #: [s] per raw sample: how far the instants the samples were taken at scatter around the time axis (white part;
+    #: the cleaning's clock check, ``meta["sampling"]["clock"]``), 0 where none was resolved; noise in the
+    #: derivatives (:mod:`.clock_noise`)
+    instant_scatter: np.ndarray | None = None
     _col_cache: dict = field(default_factory=dict)
     _inst_cache: dict = field(default_factory=dict)
     _cross_cache: dict = field(default_factory=dict)
+    _timing_cache: dict = field(default_factory=dict)
+    _inertia_keys: set = field(default_factory=set)
     _memo_cache: dict = field(default_factory=dict)
     _rows_cache: dict = field(default_factory=dict)
 
     @property
     def tools(self) -> FrameTools:
         """The frame's fitting functions, for the effect modules' forms (:class:`FrameTools`)."""
+        from .clock_noise import decimated_cross
         from .loop_noise import compensated_solve, filter_cross_of_load, voltage_rate_cross
 
         return FrameTools(fit_columns, delta_bic, heldout_comparison, robust_std, compensated_solve,
-                          filter_cross_of_load, voltage_rate_cross)
+                          filter_cross_of_load, voltage_rate_cross, decimated_cross)
 
     # decimated helpers
     @property
@@ -436,7 +444,27 @@ class Context:
                     S["i_col"] = S.get("i_q")
                 if any(not np.array_equal(z[eq], out[eq]) for eq in out):
                     self._inst_cache[key] = z
+            if getattr(builder, "inertia", False):
+                self._inertia_keys.add(key)
+            # the scattered instants' noise the column shares with the residual (:mod:`.clock_noise`); a column
+            # instrumented by the lagged acceleration does not share it
+            if not ("omega_dot" in swap and key in self._inst_cache):
+                from .clock_noise import column_cross
+
+                timing = column_cross(self, lambda: self._build(builder), out)
+                if timing:
+                    self._timing_cache[key] = timing
         return self._col_cache[key]
+
+    def timing_cross(self, key) -> dict[str, float]:
+        """Expected ``sum over an equation's training rows of column x u`` for the noise ``u`` of samples taken at
+        scattered instants in the inertia column (:mod:`.clock_noise`): the residual holds ``-(J + beta_J) u``,
+        ``beta_J`` the inertia column's coefficient (:meth:`is_inertia`); empty without a resolved scatter."""
+        return self._timing_cache.get(key, {})
+
+    def is_inertia(self, key) -> bool:
+        """Whether the column ``key`` is the rotor inertia's (its builder says ``inertia = True``)."""
+        return key in self._inertia_keys
 
     def train_rows(self, eq: str) -> np.ndarray:
         hit = self._rows_cache.get(("rows", eq))
@@ -523,7 +551,7 @@ def prepare(parts: list[tuple[Any, bool]], params: ActuatorParams, *, fc: float 
             holdout: float = 0.3, voltage_timing: str = "auto") -> Context:
     """Concatenate recordings (``(signals, is_holdout_recording)``), fill masks, derive signals, choose
     the filter. With a single recording, the held-out part is chosen by :func:`holdout_mask`."""
-    times, chans, segs, hold, starts = [], {}, [], [], []
+    times, chans, segs, hold, starts, scatter = [], {}, [], [], [], []
     offset, n0 = 0.0, 0
     names: set = set()
     notes: list[str] = []
@@ -546,6 +574,8 @@ def prepare(parts: list[tuple[Any, bool]], params: ActuatorParams, *, fc: float 
         for a, b in seglist:
             segs.append((int(a) + n0, int(b) + n0))
         hold.append(np.full(n, bool(is_ho)))
+        clock = ((getattr(sig, "meta", {}) or {}).get("sampling") or {}).get("clock") or {}
+        scatter.append(np.full(n, float(clock.get("instant_scatter_s") or 0.0)))
         dt = np.median(np.diff(t)) if n > 1 else 1.0
         offset = tt[-1] + 10 * dt
         n0 += n
@@ -592,7 +622,8 @@ def prepare(parts: list[tuple[Any, bool]], params: ActuatorParams, *, fc: float 
         raise ValueError(f"voltage_timing: expected one of {', '.join(VOLTAGE_TIMINGS)}, got {voltage_timing!r}")
     ctx = Context(params=params, t=t, segments=segments, fs=fs, dec=dec, have=set(raw), raw=raw, valid=valid,
                   notes=notes, steady=steady, part_starts=tuple(starts), voltage_timing=voltage_timing,
-                  declared_timing=declared_timing([sig for sig, _ in parts]))
+                  declared_timing=declared_timing([sig for sig, _ in parts]),
+                  instant_scatter=np.concatenate(scatter))
     if len(parts) > 1 and any(h for _, h in parts):
         ctx.holdout_raw = np.concatenate(hold)
     else:
@@ -893,7 +924,9 @@ def _derive(ctx: Context) -> None:
             use_pos = False
             ctx.notes.append(f"d(position)/dt is {ratio:.3g} x the velocity channel: speed taken from the velocity "
                              f"channel; angle-dependent effects use the position as recorded")
+    S["omega_from_position"] = np.array(0.0)
     if use_pos:
+        S["omega_from_position"] = np.array(1.0)
         # central differences of the angle: no delay (a drive's velocity is often a backward difference,
         # half a sample late, which looks like a resistance error in the voltage equation)
         S["omega"] = _gradient(S["theta"], t, segs)
@@ -908,6 +941,7 @@ def _derive(ctx: Context) -> None:
                 # a coarse log: the difference over +-1 sample attenuates the motion band (6 % for a 1 Hz gait
                 # at 10 Hz, several times a resistance change's voltage); an aligned velocity channel does not
                 S["omega"] = raw["velocity"]
+                S["omega_from_position"] = np.array(0.0)
                 ctx.valid["omega"] = ctx.valid["velocity"]
                 f_m = min(MOTION_BAND_HZ, 0.1 * ctx.fs)
                 x = 2 * math.pi * f_m / ctx.fs
@@ -1212,6 +1246,8 @@ def fit_columns(ctx: Context, cols: dict[str, dict[str, np.ndarray]], keys: list
     Xs, Zs, ys, parts = [], [], [], []
     use_iv = False
     bias = np.zeros(len(keys))      # expected Xᵀe of columns correlated with the noise by construction
+    timing = np.zeros(len(keys))    # ... the scattered instants' share, per unit of the inertia (-(J + beta_J) timing)
+    j_inertia = next((j for j, k in enumerate(keys) if ctx.is_inertia(k)), None)
     for eq in blocks:
         B = ctx.blocks[eq]
         rows = ctx.train_rows(eq)
@@ -1222,6 +1258,7 @@ def fit_columns(ctx: Context, cols: dict[str, dict[str, np.ndarray]], keys: list
             c = cols[k].get(eq)
             if c is not None:
                 bias[j] += w * w * float((ctx.cross(k) or {}).get(eq, 0.0))
+                timing[j] += w * w * float(ctx.timing_cross(k).get(eq, 0.0))
                 X[:, j] = ctx.on_train(c, eq)
                 inst = ctx.instrument(k)
                 if inst is not None and inst.get(eq) is not None:
@@ -1240,9 +1277,15 @@ def fit_columns(ctx: Context, cols: dict[str, dict[str, np.ndarray]], keys: list
         scale = np.sqrt((X ** 2).sum(axis=0))
         scale[scale == 0] = 1.0
         Xn, Zn = X / scale, Z / scale
+        A_n = Zn.T @ Xn
+        if timing.any():   # Zᵀ(y - Xβ) = -(J + β_J) timing: the inertia coefficient's share moves to the left
+            J = ctx.params.motor.rotor_inertia
+            bias = bias - J * timing
+            if j_inertia is not None:
+                A_n[:, j_inertia] -= timing / (scale * scale[j_inertia])
         if bias.any():   # bias-compensated: Zᵀ(y - Xβ) = E[Zᵀe]
             use_iv = True
-            beta_n, *_ = np.linalg.lstsq(Zn.T @ Xn, Zn.T @ y - bias / scale, rcond=1e-12)
+            beta_n, *_ = np.linalg.lstsq(A_n, Zn.T @ y - bias / scale, rcond=1e-12)
         elif use_iv:   # instrumental variables: Zᵀ(y - Xβ) = 0
             beta_n, *_ = np.linalg.lstsq(Zn.T @ Xn, Zn.T @ y, rcond=1e-12)
         else:
@@ -1276,7 +1319,7 @@ def fit_columns(ctx: Context, cols: dict[str, dict[str, np.ndarray]], keys: list
         tau = float(np.mean(taus)) if taus else 1.0
         try:
             if use_iv:
-                A = np.linalg.pinv(Zn.T @ Xn)
+                A = np.linalg.pinv(A_n)
                 cov_n = A @ (Zn.T @ Zn) @ A.T * s2 * tau
             else:
                 cov_n = np.linalg.pinv(Xn.T @ Xn) * s2 * tau

@@ -31,6 +31,9 @@ What :func:`clean` does, in order
    size (max of p1..p99 range and 99th-percentile magnitude): gross errors only) from the
    window median, which leaves and returns to the same level -> masked. Step edges and overshoot at a
    step are not spikes. Commands are never masked (they are what was sent).
+6b. the clock (:mod:`.clock`): stamps that scatter around a uniform clock the samples follow (the angle says so)
+   are replaced by that clock; stamps the samples follow are kept; instants that scatter around the time axis kept
+   are measured. Each a ``clock_jitter`` issue with its size.
 7. constant channels, stuck runs (identical values for >= 2 s in a channel that normally changes every
    sample) and clipping (a histogram spike exactly at the channel's max or min: >= 1 % of the samples and
    >= 10 x the typical count per level, not a rest value near 0, not a coarse sensor with < 20 levels)
@@ -45,6 +48,7 @@ from typing import Any
 
 import numpy as np
 
+from . import clock
 from ..signals import CANONICAL, COMMAND_CHANNELS, DataIssue, Signals
 
 DEFAULTS: dict[str, Any] = {
@@ -238,6 +242,53 @@ def _segments(ctx: _Ctx, t: np.ndarray, forced: set[int]) -> tuple[list[tuple[in
                   "segment split")
     cuts = sorted({0, n} | {int(g) + 1 for g in gaps} | {p for p in forced if 0 < p < n})
     return [(a, b) for a, b in zip(cuts[:-1], cuts[1:]) if b > a], sampling
+
+
+def _clock(ctx: _Ctx, t: np.ndarray, ch: dict, segments) -> tuple[np.ndarray, "clock.ClockCheck"]:
+    """Which clock the samples follow (:mod:`.clock`): stamps that scatter around a uniform clock the samples follow
+    are replaced by it; stamps the samples follow are kept; samples whose instants scatter around the time column
+    kept are reported with the size of the scatter. Every case is a ``clock_jitter`` issue."""
+    cc = clock.check(t, ch, segments)
+    T = cc.period_s
+    t0 = float(t[0]) if len(t) else None
+
+    def ms(x: float) -> str:
+        return f"{_g(1e3 * x)} ms ({_g(100 * x / T)} % of the {_g(1e3 * T)} ms period)"
+
+    def sc(s) -> str:
+        return "not measured" if s is None else f"{_g(1e3 * s.sigma_s)} ± {_g(1e3 * s.sd_s)} ms"
+
+    if cc.irregular_stamps:
+        head = f"time: the stamps scatter {ms(cc.stamp_scatter_s)} around the uniform clock their moving average makes"
+        how = (f"; the {cc.channel} places the samples' instants {sc(cc.on_stamps)} around the stamps and "
+               f"{sc(cc.on_uniform)} around the uniform clock (its 4-point interpolation residual against its "
+               f"derivative squared)") if cc.channel else ""
+        if cc.follows == "uniform":
+            ctx.issue("clock_jitter", "time", len(t), t0,
+                      f"{head}, and the samples follow that clock (a logger that stamps a sample when it receives "
+                      f"it){how}", "time column replaced by the uniform clock (the stamps kept in "
+                      "meta['recorded_time']); derivatives taken on it")
+        elif cc.follows == "stamps":
+            ctx.issue("clock_jitter", "time", len(t), t0,
+                      f"{head}, and the samples follow the stamps (each taken when stamped){how}",
+                      "none: the recorded time axis is kept; derivatives taken on it (filters treat the samples "
+                      "as evenly spaced)")
+        else:
+            why = "no angle recorded" if cc.channel is None else "the motion cannot tell"
+            ctx.issue("clock_jitter", "time", len(t), t0,
+                      f"{head}; whether the samples follow the stamps or that clock is undecided ({why}){how}",
+                      "none: the recorded time axis is kept")
+    s = cc.instant_scatter
+    if cc.instant_scatter_s > 0:
+        axis = "the uniform clock the time column was replaced by" if cc.follows == "uniform" else "their stamps"
+        ctx.issue("clock_jitter", "time", s.samples, t0,
+                  f"time: the samples were taken at instants that scatter {ms(s.sigma_s)} ± {_g(1e3 * s.sd_s)} ms "
+                  f"around {axis} (the {cc.channel}'s 4-point interpolation residual grows with its derivative "
+                  f"squared, z = {_g(s.z)}; the white part: a slowly wandering clock does not show): speed and "
+                  f"acceleration from the samples carry noise in proportion to the speed",
+                  "none: the instants cannot be recovered from the log; the equation error counts that noise "
+                  "in the acceleration")
+    return cc.time, cc
 
 
 # ====================================================================================== helpers / checks
@@ -779,6 +830,8 @@ def clean(raw: Signals, limits: dict | None = None, params=None) -> Signals:
     _unit_suspects_self(ctx, t, ch)
     first = sorted((c for c in ch if c not in TORQUES), key=lambda c: c != "bus_voltage")  # bus first: it sets limits
     _limits_and_spikes(ctx, t, ch, segments, first)
+    t, clock_check = _clock(ctx, t, ch, segments)
+    sampling["clock"] = clock_check.to_dict()
     _unit_suspects_torque(ctx, t, ch)
     _position_velocity(ctx, t, ch, segments)
     _signs(ctx, t, ch)
@@ -872,6 +925,8 @@ def clean(raw: Signals, limits: dict | None = None, params=None) -> Signals:
     meta["masked"] = {k: {"index": np.asarray(v["index"]), "value": np.asarray(v["value"]), "reason": v["reason"]}
                       for k, v in ctx.masked.items()}
     meta["sampling"] = sampling
+    if clock_check.follows == "uniform":
+        meta["recorded_time"] = raw.time[idx].astype(float) * raw_meta_time_scale
     meta["rate_hz"] = sampling.get("rate_hz", float("nan"))
     meta["notes"] = ctx.notes
     meta["cleaned"] = True
