@@ -26,8 +26,8 @@ import numpy as np
 
 from ..effects import Route, registry
 from ..effects.coulomb_friction import col_fric_sign
+from ..effects.position_dependent_load import col_load
 from ..effects.viscous_friction import col_viscous
-from ..frame import candidates as cands
 from ..frame import equation_error as ee
 from ..frame.selection import GateConfig
 from .inverse import BodyMass, BodyModel
@@ -38,7 +38,7 @@ EFFECT = registry.one(lambda e: e.route is Route.BODY)
 PER_JOINT_LOAD = registry.by_field("load.gravity_torque")[0]
 
 #: always fitted on every joint (cheap, never aliased with a body's mass)
-_NUISANCE = (("coulomb", col_fric_sign), ("viscous", col_viscous), ("const", cands.col_load("const")))
+_NUISANCE = (("coulomb", col_fric_sign), ("viscous", col_viscous), ("const", col_load("const")))
 
 
 def _scale_columns(ctx, qdd_s: np.ndarray, tau_raw: np.ndarray, tau_s: np.ndarray) -> dict[str, np.ndarray]:
@@ -53,7 +53,7 @@ def _scale_columns(ctx, qdd_s: np.ndarray, tau_raw: np.ndarray, tau_s: np.ndarra
     a_s = N * qdd_s
     P_s = S["P"] - J * (S["omega_dot"] - a_s) - (tau_raw - tau_s) / N
     return {"kt": -P_s, "inertia": a_s}
-_LOADS = (("sin", cands.col_load("sin")), ("cos", cands.col_load("cos")))
+_LOADS = (("sin", col_load("sin")), ("cos", col_load("cos")))
 
 
 @dataclass(frozen=True)
