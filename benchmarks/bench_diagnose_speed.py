@@ -27,6 +27,7 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "test"))
+sys.path.insert(0, str(REPO))      # this checkout's package in-process too (the subprocess runs from REPO)
 os.environ.setdefault("MPLBACKEND", "Agg")
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
@@ -71,7 +72,8 @@ def main() -> int:
     walls = _time_cli(argv, args.repeat)
     rep = json.loads((tmp / "report.json").read_text())
     t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-m", "bldc_actuator.cli"] + argv, capture_output=True, text=True)
+    proc = subprocess.run([sys.executable, "-m", "bldc_actuator.cli"] + argv, capture_output=True, text=True,
+                          cwd=REPO)
     sub = time.perf_counter() - t0
     split = _split(csv, tmp / "nominal.yaml", tmp / "split")
     print(f"\nend to end in-process (load + clean + diagnose + JSON + report.md/PNGs + params), {args.repeat} runs: "
@@ -99,7 +101,7 @@ def _startup() -> tuple[float, float]:
             "bldc_actuator.diagnosis.io.loaders, bldc_actuator.diagnosis.io.cleaning")
     t0 = time.perf_counter()
     before = os.times()
-    subprocess.run([sys.executable, "-c", code], check=True)
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=REPO)
     after = os.times()
     return time.perf_counter() - t0, (after.children_user - before.children_user) + (after.children_system
                                                                                        - before.children_system)
