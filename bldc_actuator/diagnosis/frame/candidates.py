@@ -670,8 +670,8 @@ def compliance_band(ctx) -> tuple[float, float] | None:
 
 
 def _compliance_rss(ctx, loc=None):
-    """``rss_of(f_a, zetas) -> [(rss, coefficient, noise_coefficient)]``, one per damping ratio (their columns
-    filtered together): the nominal mechanical residual (training rows) fitted by the compliance column (with the always-fitted nuisance columns and the angle harmonics of the orders
+    """``rss(f_a, zeta) -> (rss, coefficient, noise_coefficient)``: the nominal mechanical residual (training rows)
+    fitted by the compliance column (with the always-fitted nuisance columns and the angle harmonics of the orders
     the locate stage found in it: an angle-locked torque moves the rotor, so it is fitted beside the column, not
     through it), all low-passed again at
     :func:`compliance_evidence_hz`; the column filtered at the DECIMATED rate from the decimated acceleration (all
@@ -696,11 +696,11 @@ def _compliance_rss(ctx, loc=None):
     band = compliance_evidence_hz(ctx)
     sos = butter(ctx.dec.order, min(band, 0.45 * fs_dec) / (0.5 * fs_dec), output="sos")
 
-    def clean(v):       # along the samples: a matrix of columns at once (each column as alone)
+    def clean(v):
         out = np.nan_to_num(np.asarray(v, float))
         for lo, hi in bounds:
             if hi - lo > 6 * (2 * ctx.dec.order + 1):
-                out[lo:hi] = sosfiltfilt(sos, out[lo:hi], axis=0)
+                out[lo:hi] = sosfiltfilt(sos, out[lo:hi])
         return out
 
     y = clean(B.target)[rows]
@@ -711,33 +711,24 @@ def _compliance_rss(ctx, loc=None):
         nuis += [ctx.column(f"cog{o}{w[0]}1", col_harmonic(o, 1, w)).get("mechanical") for w in ("cos", "sin")]
     X0 = [clean(c)[rows] for c in nuis if c is not None]
 
-    def rss_of(f_a, zetas):
-        """``[(rss, coefficient, noise_coefficient)]`` for each damping ratio at ``f_a`` (the columns cleaned
-        together)."""
+    def rss(f_a, zeta):
         if not 0.0 < f_a < 0.45 * fs_dec:
-            return [(float("inf"), 0.0, 0.0)] * len(zetas)
-        filters = [compliance_filter(f_a, zeta, fs_dec) for zeta in zetas]
-        cols = np.zeros((len(x), len(zetas)))
-        for j, (b, a) in enumerate(filters):
-            zi = lfilter_zi(b, a)
-            for lo, hi in bounds:
-                cols[lo:hi, j], _ = lfilter(b, a, x[lo:hi], zi=zi * x[lo])
-        cols = clean(cols)[rows]
-        out = []
-        for j, (b, a) in enumerate(filters):
-            X = np.column_stack([cols[:, j]] + X0)
-            G, g = X.T @ X, X.T @ y
-            bias = np.zeros(len(g))
-            try:
-                beta, bias[0] = compensated_solve(G, g, 0, filter_cross_of_load(ctx, b, a, fs_dec, (sos, fs_dec)))
-                plain = np.linalg.solve(G, g)
-            except np.linalg.LinAlgError:
-                out.append((float("inf"), 0.0, 0.0))
-                continue
-            out.append((yy - float((g - bias) @ beta), float(beta[0]), float(plain[0] - beta[0])))
-        return out
-
-    return rss_of
+            return float("inf"), 0.0, 0.0
+        b, a = compliance_filter(f_a, zeta, fs_dec)
+        col = np.zeros_like(x)
+        zi = lfilter_zi(b, a)
+        for lo, hi in bounds:
+            col[lo:hi], _ = lfilter(b, a, x[lo:hi], zi=zi * x[lo])
+        X = np.column_stack([clean(col)[rows]] + X0)
+        G, g = X.T @ X, X.T @ y
+        bias = np.zeros(len(g))
+        try:
+            beta, bias[0] = compensated_solve(G, g, 0, filter_cross_of_load(ctx, b, a, fs_dec, (sos, fs_dec)))
+            plain = np.linalg.solve(G, g)
+        except np.linalg.LinAlgError:
+            return float("inf"), 0.0, 0.0
+        return yy - float((g - bias) @ beta), float(beta[0]), float(plain[0] - beta[0])
+    return rss
 
 
 #: anti-resonances tried before refining (log-spaced over the band) and damping ratios
@@ -765,12 +756,9 @@ def v_compliance(ctx, loc):
     if band is None or "mechanical" not in ctx.blocks:
         return []
     lo, hi = band
-    rss_of = _compliance_rss(ctx, loc)     # every damping ratio of one anti-resonance in one pass
-
-    def rss(f, z):
-        return rss_of(f, (z,))[0]
+    rss = _compliance_rss(ctx, loc)
     fs = np.geomspace(lo, hi, COMPLIANCE_GRID)
-    table = np.array([rss_of(float(f), COMPLIANCE_ZETA_GRID) for f in fs])   # (f, zeta, [rss, coef, noise])
+    table = np.array([[rss(float(f), z) for z in COMPLIANCE_ZETA_GRID] for f in fs])   # (f, zeta, [rss, coef, noise])
     val = np.where(table[:, :, 1] > table[:, :, 2], table[:, :, 0], np.inf)
     best_z = np.argmin(val, axis=1)
     curve = val[np.arange(len(fs)), best_z]
