@@ -115,7 +115,12 @@ class _Coeffs:
     def __init__(self, params: ActuatorParams | Sequence[ActuatorParams]):
         batch = not isinstance(params, ActuatorParams)
         plist = list(params) if batch else [params]
-        col = (lambda f: np.array([f(p) for p in plist], dtype=float)) if batch else (lambda f: float(f(plist[0])))
+        # a batch repeats its sets (a replay: one set per window): each field is read once per distinct set
+        first: dict[int, int] = {}
+        where = np.array([first.setdefault(id(p), len(first)) for p in plist], dtype=int)
+        distinct = list({id(p): p for p in plist}.values())
+        col = ((lambda f: np.array([f(p) for p in distinct], dtype=float)[where]) if batch
+               else (lambda f: float(f(plist[0]))))
         m = lambda name: col(lambda p: getattr(p.motor, name))  # noqa: E731
         self.batch = batch
         self.pole_pairs = m("pole_pairs")

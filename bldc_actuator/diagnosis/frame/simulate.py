@@ -171,13 +171,11 @@ def simulate_windows(ctx: Context, param_sets: list[ActuatorParams], starts: lis
     for c, p in enumerate(plist):
         groups.setdefault((p.drive.current_loop_rate, p.drive.current_loop_delay), []).append(c)
     S = ctx.sig
-    i_meas = ctx.dec.lowpass(S["i_q"])
-    cmd, _ = commands(ctx)
+    src = replay_sources(ctx)
+    i_meas, cmd, i_start, w_start = src.i_meas, src.cmd, src.i_start, src.w_start
     load = ctx.raw["torque"] if use_sensor else (ctx.raw["load_torque"] if "load_torque" in ctx.have else None)
-    i_start = start_current(ctx, i_meas)
-    w_start = start_speed(ctx)[0]
     for cols in groups.values():
-        part = _simulate_batch(ctx, [plist[c] for c in cols], st[cols], L, i_start, w_start, cmd, load)
+        part = _simulate_batch(ctx, [plist[c] for c in cols], st[cols], L, src, load)
         for k, v in part.items():
             sims[k][:, cols] = v
     idx = st[None, :] + np.arange(1, L + 1)[:, None]
@@ -189,11 +187,42 @@ def simulate_windows(ctx: Context, param_sets: list[ActuatorParams], starts: lis
     # middle of the loop period the simulated sample was held over (its last, ending at the sample)
     meas_v = None
     if "v_q" in S:
-        half = 0.5 / ctx.params.drive.current_loop_rate if "frame_delay" in S else 0.0
-        meas_v = ctx.dec.lowpass(voltage_at_sample(ctx, earlier=half))[idx]
+        meas_v = src.v_meas[idx]
     return {**sims, "meas_i": i_meas[idx], "meas_w": S["omega_s"][idx], "meas_th": S["theta"][idx],
             "meas_v": meas_v, "idx": idx}
 
+
+
+@dataclass(frozen=True)
+class ReplaySources:
+    """What every window replay of one recording is started from and compared with, whatever the parameter sets:
+    the low-passed measured q and d currents, the recorded command, the start current and speed
+    (:func:`start_current`, :func:`start_speed`) and the low-passed acting q voltage (None: not recorded)."""
+
+    i_meas: np.ndarray
+    i_d_meas: np.ndarray
+    cmd: np.ndarray
+    i_start: np.ndarray
+    w_start: np.ndarray
+    v_meas: np.ndarray | None
+
+
+def replay_sources(ctx: Context) -> ReplaySources:
+    """:class:`ReplaySources` of ``ctx``, made once per prepared recording (every replay, refit and judgement
+    reuses them)."""
+    return ctx.memo(("replay_sources",), lambda: _replay_sources(ctx))
+
+
+def _replay_sources(ctx: Context) -> ReplaySources:
+    S = ctx.sig
+    i_meas = ctx.dec.lowpass(S["i_q"])
+    v_meas = None
+    if "v_q" in S:
+        half = 0.5 / ctx.params.drive.current_loop_rate if "frame_delay" in S else 0.0
+        v_meas = ctx.dec.lowpass(voltage_at_sample(ctx, earlier=half))
+    return ReplaySources(i_meas=i_meas, i_d_meas=ctx.dec.lowpass(S["i_d"]), cmd=commands(ctx)[0],
+                         i_start=start_current(ctx, i_meas),
+                         w_start=ctx.memo(("start_speed",), lambda: start_speed(ctx)[0]), v_meas=v_meas)
 
 
 #: the crossover of a window start's two sources, as a fraction of the recording's low-pass cut-off: below it the
@@ -371,7 +400,7 @@ def _simulate_current_driven(ctx: Context, param_sets: list[ActuatorParams], sta
     S = ctx.sig
     use_sensor = "torque" in ctx.have
     w_meas = S["omega_s"]
-    w_start = start_speed(ctx)[0]
+    w_start = ctx.memo(("start_speed",), lambda: start_speed(ctx)[0])
     st_one = np.asarray(starts, int)
     last = len(ctx.t) - 1
     n_sub = replay_substeps(ctx.fs)
@@ -631,16 +660,17 @@ def window_start(plist: list[ActuatorParams], i_d_meas, i_q_meas, omega, theta, 
     return WindowStart(i_d, i_q, v, z, K)
 
 
-def _simulate_batch(ctx: Context, plist: list[ActuatorParams], st: np.ndarray, L: int, i_start: np.ndarray,
-                    w_start: np.ndarray, cmd: np.ndarray, load: np.ndarray | None) -> dict:
+def _simulate_batch(ctx: Context, plist: list[ActuatorParams], st: np.ndarray, L: int, src: ReplaySources,
+                    load: np.ndarray | None) -> dict:
     """One :class:`BatchActuator` over windows starting at ``st`` (one parameter set per column), driven by the
-    recorded command ``cmd`` and ``load`` and started from the current ``i_start`` (:func:`start_current`) and the
-    speed ``w_start`` (:func:`start_speed`)."""
+    recorded command ``src.cmd`` and ``load`` and started from the current ``src.i_start`` (:func:`start_current`)
+    and the speed ``src.w_start`` (:func:`start_speed`)."""
+    i_start, w_start, cmd = src.i_start, src.w_start, src.cmd
     b = BatchActuator(plist, warn=False)     # the drive checks test the loop against the recording's speeds
     S = ctx.sig
     w_meas = S["omega_s"]
     T_w0, T_h0 = S["T_w"][st], S["T_h"][st]
-    i_d_meas0 = ctx.dec.lowpass(S["i_d"])[st]
+    i_d_meas0 = src.i_d_meas[st]
     ws = window_start(plist, i_d_meas0, i_start[st], w_start[st], S["theta"][st], T_w0, T_h0)
     K = ws.K
     th_l, w_l = window_load_states(ctx, plist, st)      # the load behind a compliant transmission

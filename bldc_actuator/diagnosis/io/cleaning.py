@@ -393,6 +393,21 @@ def _where_minmax(t, x, bad) -> str:
     return ", ".join(parts)
 
 
+def _window_median(w: np.ndarray) -> np.ndarray:
+    """``np.nanmedian(w, axis=1)`` (NaN where a row has no finite value): rows without a NaN by ``np.median``
+    (the same value, several times faster than numpy's masked-array route for NaN-holding input)."""
+    import warnings
+
+    full = np.isfinite(w).all(axis=1)
+    out = np.empty(len(w))
+    out[full] = np.median(w[full], axis=1)
+    if not full.all():
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            out[~full] = np.nanmedian(w[~full], axis=1)
+    return out
+
+
 def _hampel(x: np.ndarray, k: int, sigma: float, floor: float) -> tuple[np.ndarray, np.ndarray]:
     """Isolated spikes of a segment (bool mask) and each sample's distance from its window median."""
     n = len(x)
@@ -402,14 +417,10 @@ def _hampel(x: np.ndarray, k: int, sigma: float, floor: float) -> tuple[np.ndarr
     from numpy.lib.stride_tricks import sliding_window_view
 
     w = sliding_window_view(pad, 2 * k + 1)
-    import warnings
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        med = np.nanmedian(w, axis=1)
-        mad = 1.4826 * np.nanmedian(np.abs(w - med[:, None]), axis=1)
-        left = np.nanmedian(w[:, :k], axis=1)
-        right = np.nanmedian(w[:, k + 1:], axis=1)
+    med = _window_median(w)
+    mad = 1.4826 * _window_median(np.abs(w - med[:, None]))
+    left = _window_median(w[:, :k])
+    right = _window_median(w[:, k + 1:])
     scale = np.maximum(mad, 0.0)
     dev = np.abs(x - med)
     thr = np.maximum(sigma * scale, floor)
