@@ -45,6 +45,7 @@ def test_a_form_that_is_only_the_least_bad_does_not_reproduce_the_drive():
     assert dff.explains_drive(0.013, 0.0198, 0.0138)
     assert dff.explains_drive(0.02, 0.05, 0.0138)
     assert not dff.explains_drive(0.05, 0.05, 0.0138)       # the file's form is not another form
+    assert dff.explains_drive(0.236, 0.312, 0.200)          # within the floor (a kernel drive under current steps)
     assert dff.within_floor(0.0178, 0.0139)                 # the kernel replaying its own drive: 1.3 x
     assert dff.within_floor(0.197, 0.123)                   # ... under current steps: 1.6 x
     assert dff.within_floor(1.0, float("nan"))              # no floor: nothing claimed

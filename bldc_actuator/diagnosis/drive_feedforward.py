@@ -122,16 +122,17 @@ def within_floor(error: float, floor: float) -> bool:
 
 def explains_drive(error: float, file_error: float, floor: float) -> bool:
     """Does a form whose simulated current error is ``error`` explain the drive where the file's form leaves
-    ``file_error`` (same windows): it leaves at most :data:`REPRODUCES_SHARE` of the file's form's error above the
-    floor (errors above it compared as ``sqrt(e^2 - floor^2)``: the floor adds in quadrature)? True without a
-    finite floor."""
+    ``file_error`` (same windows): it is better, and it reproduces the recording (:func:`within_floor`) or leaves at
+    most :data:`REPRODUCES_SHARE` of the file's form's error above the floor (errors above it compared as
+    ``sqrt(e^2 - floor^2)``: the floor adds in quadrature)? True without a finite floor."""
     if not (math.isfinite(floor) and floor > 0.0 and math.isfinite(error) and math.isfinite(file_error)):
         return True
 
     def excess(e: float) -> float:
         return math.sqrt(max(e * e - floor * floor, 0.0))
 
-    return error < file_error and excess(error) <= REPRODUCES_SHARE * excess(file_error)
+    return error < file_error and (within_floor(error, floor)
+                                   or excess(error) <= REPRODUCES_SHARE * excess(file_error))
 
 
 def form_of(params: ActuatorParams) -> Form:
