@@ -73,3 +73,42 @@ def test_a_channel_reached_only_through_an_unreproduced_loop_does_not_refuse():
     far = simulated._verdict(dict(without, velocity=without["velocity"] * 0 + 12.0), lost, "voltage", "velocity",
                              2.0, 0.05, n, 0.1, signal)
     assert far["verdict"] == "confirmed"
+
+
+@pytest.mark.slow
+def test_resistance_behind_a_delay_compensated_drive_under_a_speed_loop():
+    """R x1.3 behind the hand-written drive (a d/q PI with feed-forward whose inverse Park advances the angle by 1.5
+    periods while its voltage is applied at once: a rotation the kernel has no form for), a speed loop around it:
+    the resistance is named near its value, no drive-form finding is invented and the verdict has no "base model
+    far off" headline."""
+    from bldc_actuator.diagnosis.pipeline import diagnose
+
+    sig, nominal, truth = D.resistance_case(1.3)
+    rep = diagnose(sig, nominal)
+    assert "far off" not in rep.verdict
+    assert dff.EFFECT not in rep.effects
+    assert "resistance_error" in rep.effects, rep.verdict
+    f = rep.finding("resistance_error")
+    value, sd = f["parameters"]["phase_resistance"], f["uncertainty"]["phase_resistance"]
+    assert abs(value - truth.motor.phase_resistance) < max(3 * sd, 0.05 * truth.motor.phase_resistance)
+    lim = rep.to_dict()["model_limits"]
+    assert all(x["effect"] == dff.EFFECT and "not reproduced" in x["message"] for x in lim)
+
+
+def test_a_model_limit_is_one_record_in_the_verdict_the_json_and_report_md(tmp_path):
+    """The limit a drive-form identification states reaches every output from one record: the verdict's
+    "model limit: ..." (kind unchanged: a limit is neither a finding nor a reason for "not decidable"), the JSON's
+    ``model_limits`` and report.md's "Model limits" line."""
+    from bldc_actuator.diagnosis.report.document import DiagnosisReport
+    from bldc_actuator.diagnosis.results import decide
+
+    lim = dff.EmulationLimit("current loop", "complex_vector without feed-forward", 0.206, 0.027, 59, "held-out")
+    assert "leaves 0.206 A" in lim.message and "delay compensation" in lim.message
+    rec = decide([], [], limits=[lim.short])
+    assert rec.nothing_missing and rec.text().endswith("model limit: " + lim.short)
+    rep = DiagnosisReport(channels=["current"], findings=[], rejected=[], windows=[], data_issues=[],
+                          not_checkable=[], aliases=[], verdict_record=rec, model_limits=[lim.to_dict()])
+    d = rep.to_dict()
+    assert d["model_limits"][0]["message"] == lim.message and d["verdict_record"]["limits"] == [lim.short]
+    md = rep.write_markdown(tmp_path, plots=False).read_text()
+    assert "## Model limits" in md and lim.message in md
