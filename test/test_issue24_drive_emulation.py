@@ -75,16 +75,7 @@ def test_a_channel_reached_only_through_an_unreproduced_loop_does_not_refuse():
     assert far["verdict"] == "confirmed"
 
 
-@pytest.mark.slow
-def test_resistance_behind_a_delay_compensated_drive_under_a_speed_loop():
-    """R x1.3 behind the hand-written drive (a d/q PI with feed-forward whose inverse Park advances the angle by 1.5
-    periods while its voltage is applied at once: a rotation the kernel has no form for), a speed loop around it:
-    the resistance is named near its value, no drive-form finding is invented and the verdict has no "base model
-    far off" headline."""
-    from bldc_actuator.diagnosis.pipeline import diagnose
-
-    sig, nominal, truth = D.resistance_case(1.3)
-    rep = diagnose(sig, nominal)
+def _resistance_behind(rep, truth):
     assert "far off" not in rep.verdict
     assert dff.EFFECT not in rep.effects
     assert "resistance_error" in rep.effects, rep.verdict
@@ -93,6 +84,31 @@ def test_resistance_behind_a_delay_compensated_drive_under_a_speed_loop():
     assert abs(value - truth.motor.phase_resistance) < max(3 * sd, 0.05 * truth.motor.phase_resistance)
     lim = rep.to_dict()["model_limits"]
     assert all(x["effect"] == dff.EFFECT and "not reproduced" in x["message"] for x in lim)
+
+
+@pytest.mark.slow
+def test_resistance_behind_a_delay_compensated_drive_under_a_speed_loop():
+    """R x1.3 behind the hand-written drive as motulator's runs (a d/q PI with feed-forward, its voltage applied one
+    period after its sample and held in stator coordinates, the inverse Park advanced by 1.5 periods to compensate;
+    the file says no computation delay), a speed loop around it: the resistance is named near its value, no
+    drive-form finding is invented and the verdict has no "base model far off" headline."""
+    from bldc_actuator.diagnosis.pipeline import diagnose
+
+    sig, nominal, truth = D.resistance_case(1.3, delay_periods=1)
+    _resistance_behind(diagnose(sig, nominal), truth)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="NOT DONE: the 1.5-period advance of a voltage applied at once turns the "
+                   "logged voltage by p*omega*T against the winding's; the voltage equation has no form for it and "
+                   "refuses R at the training gate (negative ΔBIC), before any simulation judges it")
+def test_resistance_behind_an_over_compensated_drive_under_a_speed_loop():
+    """The same drive with its voltage applied at once (no computation delay) but still advanced by 1.5 periods: a
+    rotation of the applied voltage the kernel has no form for."""
+    from bldc_actuator.diagnosis.pipeline import diagnose
+
+    sig, nominal, truth = D.resistance_case(1.3)
+    _resistance_behind(diagnose(sig, nominal), truth)
 
 
 def test_a_model_limit_is_one_record_in_the_verdict_the_json_and_report_md(tmp_path):
