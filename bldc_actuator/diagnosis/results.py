@@ -46,6 +46,9 @@ class Verdict:
     undecidable: list[Undecidable] = field(default_factory=list)       #: why not decidable (or caveats of "found")
     prefix: str = ""                                                   #: e.g. "base model far off: ..."
     suffix: str = ""                                                   #: e.g. "not shown in simulation: ..."
+    #: limits of the model the findings were judged with (the drive's current loop not reproduced by any form the
+    #: simulator has): stated, never a finding, and no reason for "not decidable" on their own
+    limits: list[str] = field(default_factory=list)
 
     def __post_init__(self):
         if self.kind not in KINDS:
@@ -67,6 +70,8 @@ class Verdict:
             body = "not decidable: " + "; ".join(u.reason for u in self.undecidable)
         if self.suffix:
             body += f"; {self.suffix}"
+        if self.limits:
+            body += "; model limit: " + "; ".join(self.limits)
         return f"{self.prefix}; {body}" if self.prefix else body
 
     @property
@@ -81,11 +86,11 @@ class Verdict:
         return {"kind": self.kind, "text": self.text(), "nothing_missing": self.nothing_missing,
                 "found": list(self.found),
                 "not_checkable_in_simulation": list(self.not_checkable_in_simulation),
-                "reasons": [u.to_dict() for u in self.undecidable]}
+                "reasons": [u.to_dict() for u in self.undecidable], "limits": list(self.limits)}
 
 
 def decide(found: list[str], undecidable: list[Undecidable], *, not_checkable_in_simulation=(),
-           prefix: str = "", suffix: str = "") -> Verdict:
+           prefix: str = "", suffix: str = "", limits=()) -> Verdict:
     """``not decidable`` when a blocking reason holds (the findings are then only suspected), else ``found`` when
     something was found (the other reasons become caveats), else ``not decidable`` when there is a reason, else
     ``nothing missing``."""
@@ -94,4 +99,4 @@ def decide(found: list[str], undecidable: list[Undecidable], *, not_checkable_in
         kind = NOT_DECIDABLE
     else:
         kind = FOUND if found else (NOT_DECIDABLE if undecidable else NOTHING_MISSING)
-    return Verdict(kind, list(found), nc, list(undecidable), prefix, suffix)
+    return Verdict(kind, list(found), nc, list(undecidable), prefix, suffix, list(limits))

@@ -59,6 +59,11 @@ class WriteBack(enum.Enum):
     NONE = "none"                      #: no simulator term
 
 
+#: the simulated channel each model equation's effects show in first, the one a finding is judged on (voltage-side
+#: effects: the drive's q voltage, since the current loop hides them in the current)
+EQUATION_CHANNEL = {"mechanical": "velocity", "electrical": "voltage", "tracking": "current"}
+
+
 @dataclass(frozen=True)
 class Bounds:
     """The physically plausible range of a fitted parameter: a fit outside it explains noise, not physics, and is
@@ -161,6 +166,19 @@ class Effect:
 
     def __post_init__(self):
         object.__setattr__(self, "confusable", MappingProxyType(dict(self.confusable)))
+
+    @property
+    def channel(self) -> str:
+        """The simulated channel it is judged on: its first model equation's (:data:`EQUATION_CHANNEL`)."""
+        eqs = [q for q in self.equations if q in EQUATION_CHANNEL]
+        return EQUATION_CHANNEL[eqs[0]] if eqs else "velocity"
+
+    @property
+    def through_drive(self) -> bool:
+        """Its term acts on the drive's side of the current loop (the voltage equation, the current's tracking): it
+        reaches the speed only through the drive's current loop, so the simulated speed can refuse it only where
+        the emulated drive reproduces that loop (a resistance under a speed loop hardly moves the speed)."""
+        return self.channel != EQUATION_CHANNEL["mechanical"]
 
     @property
     def candidate(self) -> bool:

@@ -118,7 +118,19 @@ def check(ctx, limit: float = 0.15, *, starts: list[int] | None = None, window_s
     parts = ", ".join(f"{k} {identified[k]:.4g} (nominal {nominal[k]:.4g}, x{ratio[k]:.2f})" for k in far_single)
     parts = "; ".join(x for x in (parts, "; ".join(_combo_text(c) for c in far_combo)) if x)
     sim = _simulate_claim(ctx, {k: identified_all[k] for k in far}, starts, window_s, z, reference)
-    stands = (sim is not None and sim["verdict"] == "confirmed") or (sim is None and not simulation_gate)
+    # each single value of the claim must itself help (leave one out, like any finding): a value that the simulator
+    # does not need is no part of the headline (a drive the emulation cannot express leaves a spurious L beside
+    # a true R), and with fewer than two values left the core is not "far off"
+    unneeded = [k for k in far_single if sim is not None and not sim["needed"].get(k, True)]
+    if unneeded:
+        far_single = [k for k in far_single if k not in unneeded]
+        n_far = len(far_single) + 2 * len(far_combo)
+    stands = n_far >= 2 and ((sim is not None and sim["verdict"] == "confirmed") or (sim is None and not simulation_gate))
+    if stands and unneeded:            # the headline names the values the simulation needs
+        far = far_single + [p for c in far_combo for p in c["parameters"]]
+        parts = "; ".join(x for x in (", ".join(f"{k} {identified[k]:.4g} (nominal {nominal[k]:.4g}, x{ratio[k]:.2f})"
+                                                  for k in far_single),
+                                      "; ".join(_combo_text(c) for c in far_combo)) if x)
     out = {"far_off": far, "identified": identified, "nominal": nominal, "combinations": combos, "limit": limit,
            "simulation": sim, "headline": bool(stands), "fit_residual_rms_v": resid_rms}
     if stands:
@@ -133,6 +145,11 @@ def check(ctx, limit: float = 0.15, *, starts: list[int] | None = None, window_s
                f"the simulated held-out {sim['channel']} error is {sim['without']:.3g} with the nominal core and "
                f"{sim['with']:.3g} with these values (improvement {sim['improvement']:.2g}, noise floor "
                f"{sim['noise_floor']:.2g}, {sim['windows']} windows)")
+        if unneeded:
+            why += ("; left out one at a time, " + ", ".join(
+                f"{SYMBOL.get(k, k)} (error {sim['leave_one_out'][k]['without']:.3g} without it, improvement "
+                f"{sim['leave_one_out'][k]['improvement']:.2g}, floor {sim['leave_one_out'][k]['noise_floor']:.2g})"
+                for k in unneeded) + " is not needed by the simulation: no core claim of two values stands")
         out["message"] = (f"the voltage equation alone suggests {parts}, but the simulator does not confirm it "
                           f"({why}): not stated as the base model being far off")
     return out
@@ -159,13 +176,23 @@ def _simulate_claim(ctx, values: dict[str, float], starts, window_s: float, z: f
     core = {FIELDS[k]: getattr(m, k) for k in FIELDS}
     base = keep_controller_of((reference or ctx.params).replace(**core), ctx.params)
     claimed = keep_controller_of(base.replace(**{FIELDS[k]: v for k, v in values.items()}), ctx.params)
-    res = simulate.replay(ctx, [base, claimed], list(starts), window_s)
+    keys = list(values) if len(values) > 1 else []
+    # leave one out: the claim with each value back at its nominal
+    loo = [keep_controller_of(claimed.replace(**{FIELDS[k]: getattr(m, k)}), ctx.params) for k in keys]
+    res = simulate.replay(ctx, [base, claimed] + loo, list(starts), window_s)
     if not res or not res[0].get("available"):
         return None
     ch = "voltage" if res[0]["per_window"].get("voltage") is not None else "current"
     without, with_ = np.asarray(res[0]["per_window"][ch], float), np.asarray(res[1]["per_window"][ch], float)
     imp, se = simulate.mean_se(without - with_)
     verdict = "confirmed" if math.isfinite(imp) and imp > z * se and imp > 0 else "not confirmed"
+    leave, needed = {}, {}
+    for k, r in zip(keys, res[2:]):
+        e_k = np.asarray(r["per_window"][ch], float)
+        g, s_ = simulate.mean_se(e_k - with_)
+        leave[k] = {"without": float(np.mean(e_k)), "improvement": g,
+                    "noise_floor": z * s_ if math.isfinite(s_) else float("nan")}
+        needed[k] = bool(math.isfinite(g) and g > z * s_ and g > 0)
     return {"channel": ch, "without": float(np.mean(without)), "with": float(np.mean(with_)), "improvement": imp,
             "noise_floor": z * se if math.isfinite(se) else float("nan"), "windows": len(starts),
-            "window_s": window_s, "values": values, "verdict": verdict}
+            "window_s": window_s, "values": values, "verdict": verdict, "leave_one_out": leave, "needed": needed}

@@ -35,10 +35,11 @@ from ..frame import thermal as thermal_net
 from ..frame import writeback
 from ..frame.combination import same_equation
 from ..effects import Route, registry
+from ..effects.record import EQUATION_CHANNEL
 
 #: the simulated channel in which each equation's effects show (voltage-side effects: the drive's q voltage,
 #: since the current loop hides them in the current; current when no voltage was recorded)
-_CHANNEL = {"mechanical": "velocity", "electrical": "voltage", "tracking": "current"}
+_CHANNEL = EQUATION_CHANNEL
 
 
 # torque-side in the equations but drive-side in fact (the current sensors' offsets and gains: the drive acts on
@@ -84,6 +85,14 @@ def simulate_findings(ctx, sel, pars, lib, starts: list[int], window_s: float, z
         return {}
     out: dict[str, dict[str, Any]] = {}
     check = drive_check(ctx, res[0])
+    # the emulated drive's current loop is reproduced: the drive check passes and the drive-form identification
+    # states no limit (:mod:`..drive_feedforward`); only then can the simulated speed refuse a finding that reaches
+    # it only through that loop (``Effect.through_drive``)
+    limit = (getattr(ctx, "drive_identified", None) or {}).get("limit")
+    loop_reproduced = bool(check["ok"]) and limit is None
+    loop_why = (limit.short if limit is not None else
+                f"the emulated drive misses the recorded current by {check['current_error_rms']:.3g} A RMS (recorded "
+                f"{check['current_rms']:.3g} A RMS, its in-band noise {check['current_noise_lowpassed']:.2g} A)")
     # torque-side findings (friction, loads, cogging, inertia, K_t i): judged by the mechanical equation driven by
     # the MEASURED current wherever it is recorded (issue #14): it needs nothing of the drive's internals, which
     # the user rarely knows (a drive without back-EMF feed-forward delivers less than its command while the speed
@@ -129,8 +138,12 @@ def simulate_findings(ctx, sel, pars, lib, starts: list[int], window_s: float, z
                       "noise_floor": float("nan")}
             continue
         imposed = diverges and "torque" in ctx.have      # the other channels follow the imposed motion too
+        judged_other = loop_reproduced or other != "velocity" or not registry.get(e).through_drive
         closed = _verdict(r["per_window"], w_full, ch, other, z, tolerance, len(starts), window_s,
-                          None if imposed else signal)
+                          None if imposed else signal, other_judged=judged_other)
+        if not judged_other:
+            closed["other_channel_not_judged"] = (f"the {other} is not a judge of this finding: it reaches it only "
+                                                  f"through the drive's current loop, and {loop_why}")
         closed["replay"] = REPLAY_CLOSED_LOOP
         if ch == "velocity" and res_cd is not None and registry.get(e).sensor_side:
             # the drive's current sensors: the drive itself is in question, the closed loop judges (as before
@@ -267,6 +280,15 @@ def current_noise_rms(ctx) -> float:
     return above / math.sqrt(frac)
 
 
+def current_noise_in_band(ctx) -> float:
+    """[A] the recorded q current's sensor noise inside the analysis pass band: what a closed-loop replay that
+    reproduces the drive exactly still misses the low-passed recording by (the simulated current is compared with
+    the LOW-PASSED recording, so only the in-band share of the white noise is left)."""
+    if not len(ctx.sig["i_q"]):
+        return float("nan")
+    return current_noise_rms(ctx) * math.sqrt(min(ctx.dec.fc / (0.5 * ctx.fs), 1.0))
+
+
 def noise_drift(ctx, p, window_s: float) -> float:
     """RMS over a window [rad/s] of the speed random walk the current sensor's noise drives in the replay driven
     by the measured current under parameters ``p``: the motor torque ``K n`` integrated over ``J``, white noise
@@ -354,7 +376,7 @@ def drive_check(ctx, full: dict[str, Any]) -> dict[str, Any]:
     sig = float((full.get("signal_rms") or {}).get("current") or float("nan"))
     i = np.asarray(ctx.sig["i_q"], float)
     noise = float(np.std(i - ctx.dec.lowpass(i))) if len(i) else float("nan")
-    left = current_noise_rms(ctx) * math.sqrt(min(ctx.dec.fc / (0.5 * ctx.fs), 1.0)) if len(i) else float("nan")
+    left = current_noise_in_band(ctx)
     ok = bool(math.isfinite(err) and (err <= DRIVE_CHECK_FRACTION * sig
                                       or (err <= DRIVE_CHECK_NOISE * noise and err <= DRIVE_CHECK_NOISE * left)))
     close = bool(math.isfinite(err) and math.isfinite(sig) and err <= DRIVE_CHECK_CLOSE * sig)
@@ -392,18 +414,25 @@ OTHER_CHANNEL_RESOLUTION = 0.01
 
 
 def _verdict(without: dict, with_: dict, ch: str, other: str, z: float, tolerance: float, n: int,
-             window_s: float, signal: dict | None = None) -> dict[str, Any]:
-    """The leave-one-out verdict from per-window simulated errors without and with a finding."""
+             window_s: float, signal: dict | None = None, other_judged: bool = True) -> dict[str, Any]:
+    """The leave-one-out verdict from per-window simulated errors without and with a finding. The ``other``
+    channel refuses it ("worsens") only where it is a judge of it (``other_judged``: not a channel the finding
+    reaches only through a drive loop the emulation does not reproduce) and the simulation reproduces that channel
+    at all (its error with every finding below :data:`REPRODUCE_MAX` of its recorded RMS)."""
     imp, se = _paired(without[ch], with_[ch])          # error without - error with
     imp_o, se_o = _paired(without[other], with_[other]) if other else (float("nan"), float("nan"))
     sig = (signal or {}).get(ch)
     err = float(np.sqrt(np.mean(np.square(with_[ch])))) if with_.get(ch) is not None else float("nan")
+    sig_o = (signal or {}).get(other) if other else None
+    if other and sig_o and with_.get(other) is not None and \
+            float(np.sqrt(np.mean(np.square(with_[other])))) > REPRODUCE_MAX * sig_o:
+        other_judged = False
     if not math.isfinite(imp):
         verdict = "not checkable in simulation"
     elif sig and err > REPRODUCE_MAX * sig:
         verdict = (f"not checkable in simulation: the simulated actuator does not reproduce this recording's {ch} "
                    f"(error {err:.3g} RMS = {100 * err / sig:.0f} % of the recorded {sig:.3g} RMS, with every finding)")
-    elif math.isfinite(imp_o) and imp_o < -z * se_o and imp_o < -tolerance * max(
+    elif other_judged and math.isfinite(imp_o) and imp_o < -z * se_o and imp_o < -tolerance * max(
             float(np.mean(with_[other])), OTHER_CHANNEL_RESOLUTION * float((signal or {}).get(other) or 0.0)):
         verdict = f"worsens the simulated {other}"
     elif imp > z * se and imp > 0:
@@ -412,8 +441,8 @@ def _verdict(without: dict, with_: dict, ch: str, other: str, z: float, toleranc
         verdict = "not confirmed"
     return {"channel": ch, "without": float(np.mean(without[ch])), "with": float(np.mean(with_[ch])),
             "improvement": imp, "noise_floor": z * se, "other_channel": other,
-            "other_channel_change": -imp_o if math.isfinite(imp_o) else None, "verdict": verdict,
-            "windows": n, "window_s": window_s}
+            "other_channel_change": -imp_o if math.isfinite(imp_o) else None, "other_channel_judged": other_judged,
+            "verdict": verdict, "windows": n, "window_s": window_s}
 
 
 def judge_voltage_limit(ctx, params_with, finding: dict[str, Any], starts: list[int], window_s: float,

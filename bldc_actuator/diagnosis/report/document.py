@@ -70,6 +70,8 @@ class DiagnosisReport:
     nominal_params: ActuatorParams | None = None
     verdict_record: Verdict | None = None     #: THE verdict (:mod:`.results`): every output derives from it
     residual_structure: list = field(default_factory=list)   #: what is left after the findings, where it sits
+    #: what the simulator cannot reproduce of this recording (the drive's current loop: drive_feedforward.EmulationLimit)
+    model_limits: list = field(default_factory=list)
     method: str = "equation error + simulation"
     _internals: dict = field(default_factory=dict, repr=False)
 
@@ -124,7 +126,7 @@ class DiagnosisReport:
              "not_simulated": self.not_simulated, "compare": self.compare, "locate": loc,
              "selection_rounds": self.rounds, "parameter_correlations": self.correlations,
              "parameter_combinations": self.combinations,
-             "residual_structure": self.residual_structure,
+             "residual_structure": self.residual_structure, "model_limits": self.model_limits,
              "setup": self.setup, "timing": self.timing, "notes": self.notes}
         return _clean(d)
 
@@ -191,6 +193,8 @@ def _markdown(r: DiagnosisReport, images: dict[str, str]) -> str:
         for u in r.verdict_record.undecidable:
             L.append(f"- {u.reason}" + (f". What to do: {u.remedy}" if u.remedy else ""))
         L.append("")
+    if r.model_limits:
+        L += ["## Model limits", ""] + [f"- {x['message']}" for x in r.model_limits] + [""]
     if r.findings:
         L += ["## What is missing", ""]
         for f in r.findings:

@@ -20,6 +20,7 @@ from ..frame import simulate
 from ..frame import thermal as thermal_net
 from ..frame.equation_error import ee_metrics, rms
 from .document import DiagnosisReport
+from .. import drive_feedforward
 from ..results import Undecidable, decide
 from ..frame.selection import fit_model, nested_aliases
 from ..records import Judgement, Model, Say, Search
@@ -243,7 +244,9 @@ def run(signals, params, s: Search, j: Judgement, m: Model, options, say: Say, t
             reasons.insert(0, Undecidable("not_shown_in_simulation", f"nothing shown in simulation: {msg}",
                                           "log faster than the control loops' bandwidth"))
     base = m.base
+    limit = drive_feedforward.limit_of(ctx.drive_identified)
     verdict_rec = decide(names, reasons, prefix=base["message"] if base else "", suffix=suffix,
+                         limits=[limit.short] if limit is not None else [],
                          not_checkable_in_simulation=[f["effect"] for f in findings
                                                       if f.get("not_checkable_in_simulation")])
     verdict = verdict_rec.text()
@@ -272,6 +275,7 @@ def run(signals, params, s: Search, j: Judgement, m: Model, options, say: Say, t
         data_issues=s.data_issues, not_checkable=not_checkable,
         aliases=_aliases(sel, lib, ctx, m.params, s.located), verdict_record=verdict_rec,
         residual_structure=[x.to_dict() for x in structures],
+        model_limits=[limit.to_dict()] if limit is not None else [],
         notes=_data_notes(signals) + ctx.notes + m.notes + ([base["message"]] if base else []), compare=compare,
         locate=s.located,
         rounds=sel.rounds, correlations=j.final.correlations, combinations=j.final.combined,
