@@ -9,7 +9,8 @@ as a subprocess: ``bldc-actuator diagnose LOG --params ak80_9 --mujoco-model STA
 
     python benchmarks/bench_robot_speed.py [--seconds 60] [--out DIR] [--profile] [--reuse]
 
-Prints: simulate wall, diagnose wall (subprocess), the load average before/after, and with ``--profile`` the
+Prints: simulate wall, diagnose wall and CPU time (subprocess, user + sys: the figure that survives a shared
+machine's load), the load average before/after, and with ``--profile`` the
 stages' split (cProfile of the same call in-process: the cumulative time of the route's stages).
 """
 
@@ -147,13 +148,18 @@ def main(argv=None) -> int:
     cli = [str(Path(sys.executable).parent / "bldc-actuator")]
     cmdline = cli + ["diagnose", str(csv), "--params", PRESET, "--mujoco-model", str(mjcf), "--joint-map", jmap,
                      "--json", str(out / "robot.json")]
+    import resource
+
     load0 = os.getloadavg()
+    ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     env = {**os.environ, "PYTHONPATH": str(ROOT)}   # this checkout's bldc_actuator, not the venv's install
     r = subprocess.run(cmdline, capture_output=True, text=True, cwd=ROOT, env=env)
     wall = time.perf_counter() - t0
     load1 = os.getloadavg()
-    print(f"diagnose --mujoco-model ({len(joints)} joints, {args.seconds:g} s log): wall {wall:.1f} s, exit {r.returncode}; "
+    ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (ru1.ru_utime - ru0.ru_utime) + (ru1.ru_stime - ru0.ru_stime)
+    print(f"diagnose --mujoco-model ({len(joints)} joints, {args.seconds:g} s log): wall {wall:.1f} s (CPU {cpu:.1f} s), exit {r.returncode}; "
           f"load average {load0[0]:.1f} before, {load1[0]:.1f} after; {os.cpu_count()} cores")
     if r.returncode not in (0, 1, 2):
         print(r.stderr[-2000:])
