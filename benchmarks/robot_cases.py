@@ -180,6 +180,88 @@ def simulate(case: str, seconds: float = 20.0, seed_offset: int = 0) -> Log:
                current=cur + rng.normal(0.0, NOISE["current"], cur.shape), current_command=cmd)
 
 
+def mujoco_native_parameters(p) -> dict[str, float]:
+    """MuJoCo's joint parameters for an actuator ``p`` (the tool's values are on the MOTOR side; MuJoCo's at the
+    joint, i.e. the output, through an ideal gear of ratio N): ``frictionloss = N τ_c`` (Coulomb, N·m at the
+    output), ``damping = N² b`` (viscous, N·m·s/rad at the output), ``armature = N² J_rotor`` (kg·m²), and the
+    ``<motor>`` actuator's ``gear = N`` with ``ctrl = K_t i_q`` (N·m at the rotor)."""
+    n = p.gear.gear_ratio
+    return {"frictionloss": n * p.effects.coulomb_friction, "damping": n * n * p.motor.viscous_damping,
+            "armature": n * n * p.motor.rotor_inertia, "gear": n}
+
+
+def mujoco_native_run(mjcf: Path, joints, true_params: dict, nominal, q_ref, qd_ref, qdd_ref, rng,
+                      body_mass: dict | None = None):
+    """A run integrated by MuJoCo ALONE (``mj_step``; no bldc_actuator kernel): every joint driven by a MuJoCo
+    ``<motor>`` actuator (gear N, ``ctrl = K_t,true i``), with the true actuator's ``frictionloss``, ``damping`` and
+    ``armature`` on the joint (:func:`mujoco_native_parameters`), and the body's masses changed by ``body_mass``
+    {body: Δm [kg]} (inertia scaled alongside). The script commands a current ``i`` (computed torque on the
+    NOMINAL model + PD) that the drive is taken to follow exactly; the LOGGED current is ``i`` plus noise.
+    Returns (position, velocity, current, current_command), (n, len(joints)), before quantization/noise
+    except the current's."""
+    import mujoco
+
+    from bldc_actuator.diagnosis.body.inverse import BodyModel
+
+    text = Path(mjcf).read_text()
+    n_ = nominal.gear.gear_ratio
+    motors = "".join(f'<motor name="m_{j}" joint="{j}" gear="{n_:.9g}"/>' for j in joints)
+    text = text.replace("</mujoco>", f"<actuator>{motors}</actuator></mujoco>")
+    model = mujoco.MjModel.from_xml_string(text)
+    for name, dm in (body_mass or {}).items():
+        b = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name)
+        f = (model.body_mass[b] + dm) / model.body_mass[b]
+        model.body_mass[b] *= f
+        model.body_inertia[b] *= f
+    jid = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, j) for j in joints]
+    qadr, dof = model.jnt_qposadr[jid], model.jnt_dofadr[jid]
+    kt_true = np.empty(len(joints))
+    for k, j in enumerate(joints):
+        pj = true_params[j]
+        if pj.gear.gear_ratio != n_:
+            raise ValueError(f"{j}: gear.gear_ratio {pj.gear.gear_ratio} differs from the nominal {n_}")
+        mp = mujoco_native_parameters(pj)
+        model.dof_frictionloss[dof[k]] = mp["frictionloss"]
+        model.dof_damping[dof[k]] = mp["damping"]
+        model.dof_armature[dof[k]] = mp["armature"]
+        kt_true[k] = pj.motor.torque_constant_q
+    model.opt.timestep = 1.0 / RATE_HZ
+    data = mujoco.MjData(model)
+    data.qpos[qadr] = q_ref[0]
+    mujoco.mj_forward(model, data)
+    kt_n = nominal.motor.torque_constant_q * n_
+    ff = BodyModel(str(mjcf), joints).torques(q_ref, qd_ref, qdd_ref) + nominal.motor.rotor_inertia * n_ * n_ * qdd_ref
+    n = len(q_ref)
+    pos, vel, cmd = (np.zeros((n, len(joints))) for _ in range(3))
+    act = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, f"m_{j}") for j in joints]
+    for k in range(n):
+        q, v = data.qpos[qadr].copy(), data.qvel[dof].copy()
+        pos[k], vel[k] = q, v
+        i_cmd = (ff[k] + KP * (q_ref[k] - q) + KD * (qd_ref[k] - v)) / kt_n
+        cmd[k] = i_cmd
+        data.ctrl[act] = kt_true * i_cmd
+        mujoco.mj_step(model, data)
+    cur = cmd + rng.normal(0.0, NOISE["current"], cmd.shape)
+    return pos, vel, cur, cmd
+
+
+def simulate_mujoco(case: str, seconds: float = 20.0, seed_offset: int = 0) -> Log:
+    """Run ``case`` with the MuJoCo-native truth (:func:`mujoco_native_run`: MuJoCo's own motors, frictionloss,
+    damping and armature; no bldc_actuator kernel) and log it as :func:`simulate` does."""
+    tr = truth(case)
+    rng = np.random.default_rng(2600 + 97 * CASES.index(case) + 100_000 * seed_offset)
+    nominal = _nominal()
+    n = int(round(seconds * RATE_HZ))
+    t = np.arange(n) / RATE_HZ
+    q_ref, qd_ref, qdd_ref = reference(t, rng)
+    acts = {j: nominal.replace(**tr.actuators.get(j, {})) for j in MODEL_JOINTS}
+    pos, vel, cur, cmd = mujoco_native_run(MJCF, MODEL_JOINTS, acts, nominal, q_ref, qd_ref, qdd_ref, rng,
+                                           tr.body_mass)
+    quantum = 2 * np.pi / ENCODER_COUNTS
+    return Log(t=t, position=np.round(pos / quantum) * quantum,
+               velocity=vel + rng.normal(0.0, NOISE["velocity"], vel.shape), current=cur, current_command=cmd)
+
+
 def diagnose_case(csv: Path, **options):
     """The robot diagnosis of a case's CSV against the nominal parameters and MJCF."""
     from bldc_actuator.diagnosis.body.robot import diagnose_robot_file
@@ -229,6 +311,9 @@ def main(argv=None) -> int:
     ap.add_argument("--cases", default=",".join(CASES))
     ap.add_argument("--out", default=None, help="directory for the CSVs (default: a temporary one)")
     ap.add_argument("--seed-offset", type=int, default=0, help="0 = the published seed; >= 1 are held back")
+    ap.add_argument("--truth", choices=("coupled", "mujoco"), default="coupled",
+                    help="coupled: CoupledSim (this project's kernel under MuJoCo); mujoco: MuJoCo alone with its own "
+                         "<motor> actuators, frictionloss, damping and armature (a truth this project did not write)")
     ap.add_argument("--single-joint", action="store_true",
                     help="also diagnose each joint alone (the single-joint route, no MJCF) on the same files")
     args = ap.parse_args(argv)
@@ -239,7 +324,7 @@ def main(argv=None) -> int:
     total_fp = 0
     for case in [c.strip() for c in args.cases.split(",") if c.strip()]:
         t0 = time.perf_counter()
-        log = simulate(case, args.seconds, args.seed_offset)
+        log = (simulate_mujoco if args.truth == "mujoco" else simulate)(case, args.seconds, args.seed_offset)
         csv = log.write_csv(out / f"{case}.csv")
         t1 = time.perf_counter()
         report = diagnose_case(csv)

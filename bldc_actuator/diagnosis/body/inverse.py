@@ -136,10 +136,12 @@ class BodyModel:
         raise ValueError(f"body {name!r}: no body with mass hanging from a recorded joint (have: "
                          f"{', '.join(c.name for c in self.candidates())})")
 
-    def mass_column(self, body: BodyMass, q, qd, qdd) -> np.ndarray:
+    def mass_column(self, body: BodyMass, q, qd, qdd, base: np.ndarray | None = None) -> np.ndarray:
         """(n, k) change of each recorded joint's body torque per kg of ``body``'s mass (its rotational inertia
-        scaled with it) [N·m/kg]: exact, inverse dynamics being linear in a body's spatial inertia."""
-        base = self.torques(q, qd, qdd)
+        scaled with it) [N·m/kg]: exact, inverse dynamics being linear in a body's spatial inertia. ``base``: this
+        model's :meth:`torques` of the same motion where the caller has it (one inverse-dynamics pass per body
+        instead of two)."""
+        base = self.torques(q, qd, qdd) if base is None else np.asarray(base, dtype=float)
         with self._scaled(body.body_id, 2.0):
             double = self.torques(q, qd, qdd)
         return (double - base) / body.mass

@@ -225,8 +225,9 @@ def fit_masses(contexts: dict, body: BodyModel, motion: JointMotion, *, gate: Ga
     k_of = {name: i for i, name in enumerate(motion.joints)}
     columns = {}
     smooth = _smoothed(motion, parts[0].ctx)
+    tau_s = body.torques(*smooth)
     for cand in body.candidates():
-        dtau = body.mass_column(cand, *smooth)
+        dtau = body.mass_column(cand, *smooth, base=tau_s)
         cols = []
         for p in parts:
             j = k_of[p.name]
@@ -236,7 +237,6 @@ def fit_masses(contexts: dict, body: BodyModel, motion: JointMotion, *, gate: Ga
         if any(np.any(c) for c in cols):
             columns[f"body:{cand.name}"] = (cand, cols)
     tau_raw = body.torques(motion.q, motion.qd, motion.qdd) if tau is None else tau
-    tau_s = body.torques(*smooth)
     for j, p in enumerate(parts):   # each joint's own scale terms, zero on every other joint
         k = k_of[p.name]
         for key, col in _scale_columns(p.ctx, smooth[2][:, k], tau_raw[:, k], tau_s[:, k]).items():

@@ -28,6 +28,7 @@ from ..effects import registry
 from ..frame import equation_error as ee
 from ..pipeline import DiagnoseOptions, diagnose
 from ..report.document import DiagnosisReport
+from ..threads import SingleThreadedBLAS
 from .inverse import BodyModel
 from .joints import JointMap
 from .mass import BodyDiagnosis, fit_masses
@@ -146,6 +147,14 @@ def diagnose_robot(signals: Mapping[str, Any], params, mjcf, *, joint_map: Mappi
     names = list(signals)
     if not names:
         raise ValueError("signals: expected at least one joint's recording")
+    # the body's stage too (inverse dynamics, the joint-stacked mass fits): small products, where OpenBLAS's thread
+    # pool only contends on a busy machine (5x slower on 2 shared cores); each joint's diagnosis already does this
+    with SingleThreadedBLAS():
+        return _diagnose_robot(signals, params, mjcf, names, joint_map, options, joints_diagnosed)
+
+
+def _diagnose_robot(signals, params, mjcf, names, joint_map, options: DiagnoseOptions,
+                    joints_diagnosed: bool) -> RobotReport:
     ps = _per_joint(params, names)
     body = BodyModel(mjcf, names, joint_map)
     model_of = {jm.recording: jm.model for jm in body.joint_map.joints}
@@ -188,7 +197,8 @@ def diagnose_robot_file(path, params, mjcf, *, joint_map=None, profile=None, map
                          "one actuator")
     ps = _per_joint(params, joints)
     sigs = {}
-    for j in joints:
-        raw = loaders.load(path, mapping=mapping, params=ps[j], joint=j, profile=profile)
-        sigs[j] = cleaning.clean(raw, params=ps[j])
+    with SingleThreadedBLAS():
+        for j in joints:
+            raw = loaders.load(path, mapping=mapping, params=ps[j], joint=j, profile=profile)
+            sigs[j] = cleaning.clean(raw, params=ps[j])
     return diagnose_robot(sigs, ps, mjcf, joint_map=joint_map, options=options, joints_diagnosed=joints_diagnosed)
