@@ -40,6 +40,19 @@ def angle_step(theta: np.ndarray) -> tuple[float, float] | None:
     step = float(np.percentile(d, 5))
     if not step > 0 or float(np.ptp(th)) / step > 1e9:
         return None
+    # the step refined over the whole range (counts fitted to the values): a spacing read from a log printed to a
+    # few digits is off by its last digit, which drifts the grid by steps over many counts (a joint encoder's 2^16
+    # counts times the gear ratio printed to 7 digits: up to 1e-3 of a step per count, steps over 7800 counts)
+    # counts of steps from the lowest value, over a span doubled while the refined step keeps them whole
+    span = 64.0
+    while True:
+        near = u <= u[0] + span * step
+        counts = np.round((u[near] - u[0]) / step)
+        if np.ptp(counts) > 0 and np.max(np.abs((u[near] - u[0]) / step - counts)) < 0.25:
+            step = float(np.polyfit(counts, u[near], 1)[0])
+        if near.all():
+            break
+        span *= 2.0
     frac = th / step - np.round(th / step)
     off = float(np.angle(np.mean(np.exp(2j * math.pi * frac)))) / (2 * math.pi)
     dev = np.abs((frac - off + 0.5) % 1.0 - 0.5)
