@@ -15,6 +15,7 @@ import numpy as np
 
 from bldc_actuator.diagnosis.io import cleaning
 from bldc_actuator.diagnosis.pipeline import DiagnoseOptions, diagnose
+from bldc_actuator.diagnosis.frame.quantization_noise import angle_step
 from bldc_actuator.diagnosis.report import residual_structure as rs
 from issue14_generators import NOMINAL, pd_run
 
@@ -23,10 +24,10 @@ def test_angle_step_reads_the_encoder_grid_and_nothing_from_a_continuous_angle()
     t = np.arange(5000) / 1000.0
     theta = 0.8 * t + 0.3 * np.sin(2 * math.pi * 1.3 * t)
     step = 2 * math.pi / 2 ** 14
-    got = rs.angle_step(np.round(theta / step) * step + 0.1 * step)
+    got = angle_step(np.round(theta / step) * step + 0.1 * step)
     assert got is not None
     assert abs(got[0] - step) < 1e-6 * step
-    assert rs.angle_step(theta) is None
+    assert angle_step(theta) is None
 
 
 def test_noise_shapes_rise_with_each_derivative_up_to_the_cut_off():

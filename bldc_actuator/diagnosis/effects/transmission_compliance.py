@@ -247,7 +247,9 @@ def _compliance_rss(ctx, loc=None):
     noise that the drive's loop feeds into the motor makes the residual and the acceleration share a noise of
     opposite signs (:mod:`..frame.loop_noise`), whose expected cross product -- through the joint loop as the recording shows
     it, which answers the noise through the load the coefficient describes -- is taken out of the normal equations
-    together with the coefficient (:func:`..frame.loop_noise.compensated_solve`); ``noise_coefficient`` is the reflected
+    together with the coefficient (:func:`..frame.loop_noise.compensated_solve`), and so is the angle noise both
+    hold (``-J u`` in the target, ``u`` through the column: the scattered instants' and the encoder's
+    quantization, :mod:`..frame.clock_noise`, :mod:`..frame.quantization_noise`); ``noise_coefficient`` is the reflected
     inertia that noise alone would give the column (plain least squares = ``coefficient + noise_coefficient``),
     ``rss`` the residual left by the compensated fit."""
     from scipy.signal import butter, lfilter, lfilter_zi, sosfiltfilt
@@ -294,8 +296,10 @@ def _compliance_rss(ctx, loc=None):
         X = np.column_stack([clean(filt(x))[rows]] + X0)
         G, g = X.T @ X, X.T @ y
         bias = np.zeros(len(g))
-        # the scattered instants' noise the column shares with the target (-J u: frame/clock_noise.py)
-        timing = J * ctx.tools.decimated_cross(ctx, lambda u: clean(filt(u)), clean)
+        # the noise the column shares with the target (-J u): the scattered instants' (frame/clock_noise.py) and
+        # the encoder's quantization through the twice-differenced angle (frame/quantization_noise.py)
+        timing = J * (ctx.tools.decimated_cross(ctx, lambda u: clean(filt(u)), clean)
+                      + ctx.tools.quantization_cross(ctx, lambda u: clean(filt(u)), clean))
         loop = filter_cross_of_load(ctx, b, a, fs_dec, (sos, fs_dec))
         try:
             beta, bias[0] = compensated_solve(G, g, 0, lambda load: loop(load) - timing)

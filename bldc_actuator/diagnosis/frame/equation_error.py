@@ -330,6 +330,7 @@ class FrameTools:
     filter_cross_of_load: Callable   #: :func:`.loop_noise.filter_cross_of_load`
     voltage_rate_cross: Callable     #: :func:`.loop_noise.voltage_rate_cross`
     decimated_cross: Callable        #: :func:`.clock_noise.decimated_cross`
+    quantization_cross: Callable     #: :func:`.quantization_noise.decimated_cross`
 
 
 @dataclass
@@ -395,9 +396,10 @@ class Context:
         """The frame's fitting functions, for the effect modules' forms (:class:`FrameTools`)."""
         from .clock_noise import decimated_cross
         from .loop_noise import compensated_solve, filter_cross_of_load, voltage_rate_cross
+        from .quantization_noise import decimated_cross as quantization_cross
 
         return FrameTools(fit_columns, delta_bic, heldout_comparison, robust_std, compensated_solve,
-                          filter_cross_of_load, voltage_rate_cross, decimated_cross)
+                          filter_cross_of_load, voltage_rate_cross, decimated_cross, quantization_cross)
 
     # decimated helpers
     @property

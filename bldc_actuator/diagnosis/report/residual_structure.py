@@ -170,72 +170,22 @@ def noise_shapes(f: np.ndarray, dec) -> np.ndarray | None:
     return out / np.where(peak > 0, peak, 1.0)
 
 
-QUANTIZED_MIN = 0.99     #: fraction of angle samples on one grid for the angle to count as quantized
-
-
-def angle_step(theta: np.ndarray) -> tuple[float, float] | None:
-    """(step [rad], grid offset [rad]) of an angle channel that sits on a grid (an encoder's counts), or None.
-    The step is the smallest spacing of the recorded values that more than :data:`QUANTIZED_MIN` of the samples sit
-    on (within 1 % of it)."""
-    th = theta[np.isfinite(theta)]
-    if len(th) < 64:
-        return None
-    u = np.unique(th)
-    d = np.diff(u)
-    d = d[d > 1e-12 * max(1.0, float(np.max(np.abs(u))))]
-    if len(d) < 2:
-        return None
-    step = float(np.percentile(d, 5))
-    if not step > 0 or float(np.ptp(th)) / step > 1e9:
-        return None
-    frac = th / step - np.round(th / step)
-    off = float(np.angle(np.mean(np.exp(2j * math.pi * frac)))) / (2 * math.pi)
-    dev = np.abs((frac - off + 0.5) % 1.0 - 0.5)
-    if np.mean(dev < 0.01) < QUANTIZED_MIN:
-        return None
-    return step, off * step
-
-
-def _segment_gradient(x: np.ndarray, t: np.ndarray, segments) -> np.ndarray:
-    out = np.zeros_like(x)
-    for a, b in segments:
-        if b - a >= 3:
-            out[a:b] = np.gradient(x[a:b], t[a:b])
-    return out
-
-
-#: the re-made motion a quantization error is re-made on: the angle low-passed at this fraction of the cut-off (the
-#: recorded error's own lines below the cut-off, e.g. a 2086 Hz sawtooth sampled at 1 kHz sits at 86 Hz, must not be
-#: in it: quantizing an angle that holds them again cancels them)
-QUANTIZATION_MOTION_CUTOFF = 0.25
-
-
 def quantization_paths(ctx) -> dict[str, np.ndarray]:
-    """Per equation, the part of its residual the angle's quantization (:func:`angle_step`) makes, at the decimated
+    """Per equation, the part of its residual the angle's quantization (:func:`..frame.quantization_noise.angle_error`) makes, at the decimated
     instants: the error through one and two central differences (the speed and the acceleration the equations take
     from the angle) and the low-pass, scaled as the equation takes them (mechanical, in current units: -(J dw/dt +
     b w) / K; electrical: -K w). An encoder's error is not white but a sawtooth at |omega| / step and its harmonics,
     folded about the log rate: a line wherever the speed dwells (a 0.8 rad/s triangle on a 14-bit encoder logged at 1
-    kHz: 86 Hz). It is re-made by quantizing the angle, low-passed at :data:`QUANTIZATION_MOTION_CUTOFF` x the
-    cut-off, on the recorded grid: its spectrum is the recorded error's, its phase need not be. Empty when the angle
+    kHz: 86 Hz). It is re-made by quantizing the smoothed angle on the recorded grid: its spectrum is the recorded
+    error's, its phase need not be. Empty when the angle
     is not quantized or the speed is not taken from it."""
-    raw = getattr(ctx, "raw", {}) or {}
+    from ..frame.quantization_noise import angle_error
+
+    err = angle_error(ctx)
+    if err is None:
+        return {}
+    d1, d2 = err
     dec, S = ctx.dec, ctx.sig
-    if "position" not in raw or "theta" not in S or "omega" not in S or getattr(dec, "steady", False) \
-            or getattr(dec, "sos", None) is None:
-        return {}
-    theta = np.asarray(S["theta"], float)
-    grid = angle_step(np.asarray(raw["position"], float))
-    if grid is None or not np.isfinite(theta).all():
-        return {}
-    d1_rec = _segment_gradient(theta, ctx.t, ctx.segments)
-    if not np.allclose(S["omega"], d1_rec, rtol=1e-9, atol=1e-12):
-        return {}               # the speed is the velocity channel's
-    step, off = grid
-    smooth = dec.lowpass(theta, QUANTIZATION_MOTION_CUTOFF * dec.fc)
-    err = step * np.round((smooth - off) / step) + off - smooth
-    d1 = _segment_gradient(err, ctx.t, ctx.segments)
-    d2 = _segment_gradient(d1, ctx.t, ctx.segments)
     m = ctx.params.motor
     K = np.asarray(S.get("K", m.torque_constant_q), float)
     return {"mechanical": dec.apply(-(m.rotor_inertia * d2 + m.viscous_damping * d1) / K),
