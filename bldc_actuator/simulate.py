@@ -25,6 +25,7 @@ from . import profiles
 from .model import Actuator, SimResult
 from .params import ActuatorParams, ParameterError, load_preset, load_yaml
 from .scheduler import ABSURD_FACTOR, absurd_limits
+from . import drive_tuning
 from .voltage_timing import csv_comment_lines, kernel_declaration
 
 #: columns written to the CSV, in order, with units
@@ -150,14 +151,16 @@ def build_profile(args) -> profiles.Profile:
 
 def write_csv(result: SimResult, path: Path) -> None:
     """Every signal of ``result`` at its sample rate, after ``# key: value`` comment lines that declare when the
-    logged voltage acts (the kernel's held voltage: :func:`bldc_actuator.voltage_timing.kernel_declaration`; read
+    logged voltage acts (the kernel's held voltage: :func:`bldc_actuator.voltage_timing.kernel_declaration`) and what
+    the drive's current loop was tuned with (:func:`bldc_actuator.drive_tuning.declaration`; read
     them with ``pandas.read_csv(path, comment="#")``)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     t = np.asarray(result["t"], float)
     with path.open("w", newline="") as fh:
         if len(t) > 1:
             period = float(np.median(np.diff(t)))
-            for line in csv_comment_lines(kernel_declaration(result.params, period)):
+            declared = {**kernel_declaration(result.params, period), **drive_tuning.declaration(result.params)}
+            for line in csv_comment_lines(declared):
                 fh.write(line + "\n")
         w = csv.writer(fh)
         w.writerow([f"{name} [{unit}]" for name, unit in CSV_COLUMNS])

@@ -37,10 +37,13 @@ EFFECT = Effect(
     story=Story.CURRENT_TREND,
 )
 
-#: the exponents offered to the selection (the final fit refines between neighbours); the schema's usual range
-EXPONENT_GRID = (0.5, 0.75, 1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0)
-#: how far the refinement may leave the grid's ends
-EXPONENT_BOUNDS = (0.4, 5.0)
+#: the exponents offered to the selection (the final fit refines between neighbours). Saturation sets in at a knee:
+#: far below it the iron is linear and K hardly moves, so the drop's slope with |i| is finite at i = 0 and n >= 1
+#: (the linear law is the steepest start the form allows). An n < 1 law falls fastest at the smallest currents:
+#: not saturation but what a dead band or a friction near zero current does to a torque-per-amp fit.
+EXPONENT_GRID = (1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0)
+#: how far the refinement may leave the grid's ends (n = 1 is also the lower bound: see above)
+EXPONENT_BOUNDS = (1.0, 5.0)
 #: the exponent's name: the hyper-parameter, the refined nonlinear parameter and the reported parameter
 EXPONENT = "kt_saturation_exponent"
 #: the current the drop is reported at: this percentile of |i_q|

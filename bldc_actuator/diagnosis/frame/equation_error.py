@@ -29,6 +29,7 @@ import numpy as np
 from scipy import signal as sps
 
 from ... import effects, frames
+from ... import drive_tuning
 from ... import voltage_timing as vt
 from ...params import ActuatorParams
 
@@ -622,6 +623,10 @@ def prepare(parts: list[tuple[Any, bool]], params: ActuatorParams, *, fc: float 
                      "the model equations (current-proportional terms are not identifiable there)")
     if voltage_timing not in VOLTAGE_TIMINGS:
         raise ValueError(f"voltage_timing: expected one of {', '.join(VOLTAGE_TIMINGS)}, got {voltage_timing!r}")
+    # the drive the recording was made with: its current loop's model of the motor where the recording declares it
+    params, tuned = drive_tuning.apply(params, drive_tuning.declared([sig for sig, _ in parts]))
+    if tuned:
+        notes.append(tuned)
     ctx = Context(params=params, t=t, segments=segments, fs=fs, dec=dec, have=set(raw), raw=raw, valid=valid,
                   notes=notes, steady=steady, part_starts=tuple(starts), voltage_timing=voltage_timing,
                   declared_timing=declared_timing([sig for sig, _ in parts]),

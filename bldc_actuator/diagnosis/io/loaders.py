@@ -186,7 +186,8 @@ def load_many(paths: list[str | Path], *, params=None, profile=None) -> Signals:
             issues.append(i)
     first = parts[0].meta
     meta = {k_: first.get(k_) for k_ in ("profile", "profile_path", "description", "licence", "hints",
-                                          "clean_limits", "gear_ratio", "steady_state_points", "voltage_timing")
+                                          "clean_limits", "gear_ratio", "steady_state_points", "voltage_timing",
+                                          "declared")
             if k_ in first}
     declared = [p.meta.get("voltage_timing") for p in parts]
     if len({None if d is None else (d.convention, d.acts_after_sample_s) for d in declared}) > 1:

@@ -46,14 +46,21 @@ def _refuse(verdicts: list, effect: str, v: dict, unit: str, say: Say) -> None:
 
 
 def _harmful(v: dict) -> bool:
-    """A refused finding whose simulation is worse with it than without it beyond the noise floor (or that cannot
-    be simulated at all)."""
-    if "without" not in v or str(v["verdict"]).startswith("worsens"):
+    """A refused finding whose simulation is worse with it than without it beyond the noise floor on its own channel
+    (or on the other channel without a gain on its own, or that cannot be simulated at all)."""
+    if "without" not in v:
         return True
     if v.get("worse") is not None:     # the measured-current replay: raw and noise-corrected errors both worse
         return bool(v["worse"])
     floor = v.get("noise_floor")
-    return v.get("with") is not None and v["with"] - v["without"] > (floor if floor == floor and floor else 0.0)
+    floor = floor if floor == floor and floor else 0.0
+    if v.get("with") is None:
+        return str(v["verdict"]).startswith("worsens")
+    if str(v["verdict"]).startswith("worsens"):
+        # worse on the other channel: harmful unless its own channel gains beyond the floor; then the worsening
+        # may be another finding's (it is in every "with" set), and this one is judged again without those
+        return not v["without"] - v["with"] > floor
+    return v["with"] - v["without"] > floor
 
 
 def _significance(ctx, lib, pars: dict, special_findings: list, options) -> list:
