@@ -78,18 +78,40 @@ def thin(starts: list[int], max_windows: int) -> list[int]:
     return [starts[i] for i in np.linspace(0, len(starts) - 1, max_windows).round().astype(int)]
 
 
+def lowpassed_as_recorded(ctx: Context, sim: np.ndarray, idx: np.ndarray, raw: np.ndarray) -> np.ndarray:
+    """The simulated windows ``sim`` (samples x windows, at the raw sample indices ``idx``) low-passed as the
+    recording ``raw`` was (the analysis zero-phase low-pass): each window continued on both sides by the recorded
+    raw samples over the filter's settling length, so that its edges see the recording's context. A sharp step the
+    drive reproduces then meets the low-passed recording's smeared one as it is: compared unfiltered, a kernel
+    recording replayed by the kernel itself left 0.25 A RMS at 2-8 A current steps, 16 x its sensor noise."""
+    if ctx.dec.steady or not sim.size:
+        return sim.copy()
+    L = sim.shape[0]
+    pad = int(math.ceil(3.0 * ctx.fs / ctx.dec.fc))
+    ext = np.clip(idx[0][None, :] + np.arange(-pad, L + pad)[:, None], 0, len(raw) - 1)
+    x = np.asarray(raw, float)[ext]
+    x[pad:pad + L] = sim
+    bad = ~np.isfinite(x)
+    if bad.any():
+        x[bad] = 0.0
+    return sps.sosfiltfilt(ctx.dec.sos, x, axis=0)[pad:pad + L]
+
+
 def window_errors(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], length: float, *,
-                  current_d: bool = False) -> list[dict[str, np.ndarray]]:
+                  current_d: bool = False, current_lowpassed: bool = False) -> list[dict[str, np.ndarray]]:
     """Per parameter set: per-window RMS closed-loop simulated error of the current and the speed (and, with
-    ``current_d`` where the recording has it, of the d current against its low-passed reading)."""
+    ``current_d`` where the recording has it, of the d current against its low-passed reading). With
+    ``current_lowpassed`` the simulated current is low-passed as the recording was before it is compared
+    (:func:`lowpassed_as_recorded`): what a drive's form is judged on, where the steps must not count."""
     r = simulate_windows(ctx, param_sets, starts, length)
     nW = len(starts)
     have_d = current_d and "current_d" in ctx.have
     meas_d = ctx.dec.lowpass(ctx.sig["i_d"])[r["idx"][:, :nW]] if have_d else None
+    sim_i = lowpassed_as_recorded(ctx, r["sim_i"], r["idx"], ctx.sig["i_q"]) if current_lowpassed else r["sim_i"]
     out = []
     for j in range(len(param_sets)):
         sl = slice(j * nW, (j + 1) * nW)
-        e = {"current": np.sqrt(np.mean((r["sim_i"][:, sl] - r["meas_i"][:, sl]) ** 2, axis=0)),
+        e = {"current": np.sqrt(np.mean((sim_i[:, sl] - r["meas_i"][:, sl]) ** 2, axis=0)),
              "velocity": np.sqrt(np.mean((r["sim_w"][:, sl] - r["meas_w"][:, sl]) ** 2, axis=0))}
         if have_d:
             e["current_d"] = np.sqrt(np.mean((r["sim_id"][:, sl] - meas_d) ** 2, axis=0))

@@ -280,13 +280,31 @@ def current_noise_rms(ctx) -> float:
     return above / math.sqrt(frac)
 
 
-def current_noise_in_band(ctx) -> float:
+def current_noise_rms_robust(ctx) -> float:
+    """Per-sample RMS [A] of the recorded q current's sensor noise as :func:`current_noise_rms`, with the scale
+    of what lies above the low-pass taken robustly (1.4826 x its median absolute deviation): a current STEP puts a
+    few samples of large above-band content there that is the signal, not the sensor (current steps of 2-8 A at
+    1 kHz: 0.233 A in the standard deviation against 0.015 A of noise)."""
+    i = np.asarray(ctx.sig["i_q"], float)
+    if not len(i):
+        return float("nan")
+    r = i - ctx.dec.lowpass(i)
+    r = r[np.isfinite(r)]
+    if not len(r):
+        return float("nan")
+    above = 1.4826 * float(np.median(np.abs(r - np.median(r))))
+    frac = max(1.0 - ctx.dec.fc / (0.5 * ctx.fs), 0.05)
+    return above / math.sqrt(frac)
+
+
+def current_noise_in_band(ctx, robust: bool = False) -> float:
     """[A] the recorded q current's sensor noise inside the analysis pass band: what a closed-loop replay that
     reproduces the drive exactly still misses the low-passed recording by (the simulated current is compared with
     the LOW-PASSED recording, so only the in-band share of the white noise is left)."""
     if not len(ctx.sig["i_q"]):
         return float("nan")
-    return current_noise_rms(ctx) * math.sqrt(min(ctx.dec.fc / (0.5 * ctx.fs), 1.0))
+    sigma = current_noise_rms_robust(ctx) if robust else current_noise_rms(ctx)
+    return sigma * math.sqrt(min(ctx.dec.fc / (0.5 * ctx.fs), 1.0))
 
 
 def noise_drift(ctx, p, window_s: float) -> float:
