@@ -687,15 +687,18 @@ class ActuatorNode(Node):
         self.get_logger().error(f"{self.recording_error}; the actuator keeps running without recording")
 
     def _open_recorder(self, path: str) -> None:
+        from . import drive_tuning
         from .recording import McapRecorder
         from .voltage_timing import kernel_declaration
 
         meta = {"node": self.get_fully_qualified_name(), "joint_name": self.joints[0].name,
                 "joints": ",".join(j.name for j in self.joints),
                 "time": "log_time = simulation time [ns]", "package": "bldc_actuator"}
-        # when the logged q/d voltage acts (the held voltage at each ~/q_axis_state instant): the diagnosis reads it
-        decl = {j.name: kernel_declaration(self.plant.params(j.name),
-                                         self.scheduler.config.detail_period_ns * 1e-9) for j in self.joints}
+        # when the logged q/d voltage acts (the held voltage at each ~/q_axis_state instant) and the motor values the
+        # drive's current loop is tuned with (the simulated motor's own, unless drive.controller_* say otherwise):
+        # the diagnosis replays the recording with that drive
+        decl = {j.name: {**kernel_declaration(self.plant.params(j.name), self.scheduler.config.detail_period_ns * 1e-9),
+                         **drive_tuning.declaration(self.plant.params(j.name))} for j in self.joints}
         first = decl[self.joints[0].name]
         meta.update(first)
         for name, d in decl.items():

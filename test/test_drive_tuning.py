@@ -62,3 +62,41 @@ def test_the_declared_drive_is_the_one_that_reproduces_the_recording(tmp_path):
     declared, undeclared = (float(np.mean(simulate.replay(c, [true_motor], starts, 0.1)[0]["per_window"]["velocity"]))
                             for c in (ctx, ctx_bare))
     assert declared < 0.8 * undeclared          # 0.073 against 0.113 rad/s here
+
+
+def _csv(path, tuning: dict[str, str]):
+    lines = [f"# {k}: {v}" for k, v in tuning.items()]
+    path.write_text("\n".join(lines + ["time,current,voltage_q", "0,1,2", "0.001,1,2", ""]))
+    return path
+
+
+def test_a_malformed_declaration_is_refused_at_load_and_different_tunings_are_not_merged(tmp_path):
+    from bldc_actuator.diagnosis.io.loaders import load, load_many
+    from bldc_actuator.diagnosis.io.mapping import LoadError
+
+    bad = _csv(tmp_path / "bad.csv", {"drive_tuned_with_q_inductance_h": "-1"})
+    with pytest.raises(LoadError, match=r"bad.csv.*drive_tuned_with_q_inductance_h: expected a positive number in H"):
+        load(bad)
+    a = _csv(tmp_path / "a.csv", {"drive_tuned_with_phase_resistance_ohm": "0.13"})
+    b = _csv(tmp_path / "b.csv", {"drive_tuned_with_phase_resistance_ohm": "0.169"})
+    assert drive_tuning.declared([load_many([a, a])]) == {"drive.controller_resistance": 0.13}
+    with pytest.raises(LoadError, match="different current-loop tunings"):
+        load_many([a, b])
+
+
+def test_an_mcap_declares_each_joints_tuning(tmp_path):
+    """The node's MCAP metadata: the first joint's pairs, another joint's own as ``<key>.<joint>``."""
+    from bldc_actuator.diagnosis.io.mapping import LoadError
+    from bldc_actuator.diagnosis.io.mcapio import declared_pairs, declared_voltage_timing
+
+    p = load_preset("ak80_9")
+    knee = p.replace(**{"motor.phase_resistance": 0.2})
+    meta = {"node": "/a", **drive_tuning.declaration(p)}
+    meta.update({f"{k}.knee": v for k, v in drive_tuning.declaration(knee).items()})
+    rec = [("bldc_actuator", meta)]
+    assert drive_tuning.from_metadata(declared_pairs(rec, "hip"), "t")["drive.controller_resistance"] == \
+        pytest.approx(p.motor.phase_resistance)
+    assert drive_tuning.from_metadata(declared_pairs(rec, "knee"), "t")["drive.controller_resistance"] == 0.2
+    with pytest.raises(LoadError, match="drive_tuned_with_torque_constant_q_nm_per_a"):
+        declared_voltage_timing([("bldc_actuator", {"drive_tuned_with_torque_constant_q_nm_per_a": "x"})], None,
+                                tmp_path / "r.mcap")

@@ -173,6 +173,11 @@ def test_one_recording_diagnoses_per_joint(ros_context, ros_executor, tmp_path):
         p = sig.meta["params_from_recording"]
         assert p.motor.torque_constant_q == node.plant.params(j.name).motor.torque_constant_q
         assert sig.meta["voltage_timing"].convention == "applied"     # the node declares its held voltage
+        # ... and the motor values its drive's current loop is tuned with (the joint's own motor)
+        from bldc_actuator import drive_tuning
+        from bldc_actuator.params import CONTROLLER_FIELDS, controller_motor
+        assert drive_tuning.from_metadata(sig.meta["declared"], "test") == dict(
+            zip(CONTROLLER_FIELDS, controller_motor(node.plant.params(j.name))))
         assert p.drive.bus_voltage == node.plant.params(j.name).drive.bus_voltage
         # the joint's own current and motor-side angle (output angle x ITS gear ratio)
         assert abs(sig.channels["current"][-1] - node.plant.actuator(j.name).state.i_q) < 1e-9

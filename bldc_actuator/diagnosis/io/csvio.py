@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ... import drive_tuning
 from ... import voltage_timing as vt
 from ..signals import CANONICAL, DataIssue, Signals
 from .mapping import TARGETS, LoadError, Mapping, parse_expression
@@ -175,6 +176,7 @@ def load_csv(path: str | Path, mapping: Mapping | None = None, params=None, *,
     declared = vt.parse_csv_comments(raw_lines)
     try:
         timing = vt.from_metadata(declared, f"{path.name} comment lines")
+        drive_tuning.from_metadata(declared, f"{path.name} comment lines")
     except ValueError as exc:
         raise LoadError(f"{path}: {exc}") from None
     if timing is not None:

@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ... import drive_tuning
 from ..signals import CANONICAL, DataIssue, Signals
 from . import input_profiles, jsonio
 from .csvio import load_csv
@@ -194,6 +195,10 @@ def load_many(paths: list[str | Path], *, params=None, profile=None) -> Signals:
         raise LoadError(f"{', '.join(map(str, paths))}: the files declare different voltage timings ("
                         + ", ".join(f"{Path(p.source).name}: {d.convention if d else 'none'}"
                                     for p, d in zip(parts, declared)) + "): load them apart")
+    try:
+        drive_tuning.declared(parts)
+    except ValueError as exc:
+        raise LoadError(f"{', '.join(map(str, paths))}: {exc}") from None
     meta.update({"aux": {c: np.concatenate(v) for c, v in aux.items()}, "notes": [],
                  "semantics": dict(parts[-1].meta["semantics"]), "files": [Path(p.source).name for p in parts],
                  "time_offset_s": t0})

@@ -443,23 +443,36 @@ def _recorded_parameters(metadata: list[tuple[str, dict]]) -> dict | None:
         return None
 
 
-def declared_voltage_timing(metadata: list[tuple[str, dict]], joint: str | None, path: Path):
-    """The voltage timing the last ``bldc_actuator`` metadata record declares (a joint's own keys,
-    ``voltage_timing.<joint>``, over the record's), or None; a malformed one is a :class:`LoadError`."""
+def declared_pairs(metadata: list[tuple[str, dict]], joint: str | None) -> dict[str, str]:
+    """The declarations (:mod:`bldc_actuator.voltage_timing`, :mod:`bldc_actuator.drive_tuning`) of the last
+    ``bldc_actuator`` metadata record, a joint's own keys (``<key>.<joint>``) over the record's."""
+    from ... import drive_tuning
     from ... import voltage_timing as vt
 
+    keys = (vt.CONVENTION_KEY, vt.OFFSET_KEY, *drive_tuning.KEYS)
     rec = None
     for name, r in metadata:
-        if name == "bldc_actuator" and isinstance(r, dict) and vt.CONVENTION_KEY in r:
+        if name == "bldc_actuator" and isinstance(r, dict) and any(k in r for k in keys):
             rec = r
     if rec is None:
-        return None
-    keys = (vt.CONVENTION_KEY, vt.OFFSET_KEY)
+        return {}
     decl = {k: rec[k] for k in keys if k in rec}
     if joint is not None:
         decl.update({k: rec[f"{k}.{joint}"] for k in keys if f"{k}.{joint}" in rec})
+    return decl
+
+
+def declared_voltage_timing(metadata: list[tuple[str, dict]], joint: str | None, path: Path):
+    """The voltage timing the last ``bldc_actuator`` metadata record declares (:func:`declared_pairs`), or None; a
+    malformed one, or a malformed drive tuning beside it, is a :class:`LoadError`."""
+    from ... import drive_tuning
+    from ... import voltage_timing as vt
+
+    decl = declared_pairs(metadata, joint)
+    where = "MCAP metadata record bldc_actuator" + (f", joint {joint}" if joint else "")
     try:
-        return vt.from_metadata(decl, "MCAP metadata record bldc_actuator" + (f", joint {joint}" if joint else ""))
+        drive_tuning.from_metadata(decl, where)
+        return vt.from_metadata(decl, where) if vt.CONVENTION_KEY in decl else None
     except ValueError as exc:
         raise LoadError(f"{path}: {exc}") from None
 
@@ -658,6 +671,7 @@ def load_mcap(path: str | Path, mapping: Mapping | None = None, params=None, joi
                      + (f" (acts {1e6 * timing.acts_after_sample_s:+.3g} µs after its sample)"
                         if timing.acts_after_sample_s is not None else ""))
     meta = {"format": "mcap", "own_recording": own, "joint": joint if joints else None, "voltage_timing": timing,
+            "declared": declared_pairs(metadata, joint if joints else None),
             "mapping": mapping.describe(), "semantics": semantics,
             "notes": notes, "gear_ratio": gear, "params_from_recording": params_rec,
             "recorded_parameters": rec_params, "time_base": plan[base_target][0], "t0_ns": t0,
