@@ -24,6 +24,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import signal as sps
 
+from . import zero_phase
+
 
 def _impulse_energy(ctx, derivatives: int) -> np.ndarray:
     """``g^2``: the squared impulse response of ``derivatives`` central differences then the zero-phase low-pass at
@@ -33,7 +35,7 @@ def _impulse_energy(ctx, derivatives: int) -> np.ndarray:
     x[half] = 1.0
     for _ in range(derivatives):
         x = np.gradient(x, 1.0 / ctx.fs)
-    y = sps.sosfiltfilt(ctx.dec.sos, x)
+    y = zero_phase.sosfiltfilt(ctx.dec.sos, x)
     return y ** 2
 
 

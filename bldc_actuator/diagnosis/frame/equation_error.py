@@ -32,6 +32,7 @@ from ... import effects, frames
 from ... import drive_tuning
 from ... import voltage_timing as vt
 from ...params import ActuatorParams
+from . import zero_phase
 
 EQUATIONS = ("mechanical", "electrical")
 UNITS = {"mechanical": "A (q current; torque / K)", "electrical": "V (q-axis)"}
@@ -90,7 +91,7 @@ class Decimator:
         for a, b in self.segments:
             if not self.usable(a, b):
                 continue
-            y = sps.sosfiltfilt(self.sos, x[a:b], axis=0)
+            y = zero_phase.sosfiltfilt(self.sos, x[a:b], axis=0)
             out.append(y[:: self.q])
         if not out:
             return np.zeros((0,) + x.shape[1:])
@@ -106,7 +107,7 @@ class Decimator:
         out = x.copy()
         for a, b in self.segments:
             if b - a > 6 * (2 * self.order + 1):
-                out[a:b] = sps.sosfiltfilt(sos, x[a:b], axis=0)
+                out[a:b] = zero_phase.sosfiltfilt(sos, x[a:b], axis=0)
         return out
 
     def mask(self, valid_raw: np.ndarray) -> np.ndarray:

@@ -112,6 +112,8 @@ def decimated_cross(ctx, column_of, target_of) -> float:
     err = angle_error(ctx)
     if err is None or "mechanical" not in ctx.blocks or ctx.steady:
         return 0.0
-    u = ctx.dec.apply(err[1] / ctx.sig["K"])
+    memo = getattr(ctx, "memo", None)
+    share = lambda: ctx.dec.apply(err[1] / ctx.sig["K"])    # noqa: E731 - the same array on every call (memo)
+    u = share() if memo is None else memo(("quantization_decimated_share",), share)
     rows = ctx.train_rows("mechanical")
     return float(column_of(u)[rows] @ target_of(u)[rows])

@@ -28,6 +28,7 @@ from ...model import BatchActuator
 from ...params import ActuatorParams, controller_motor, keep_controller_of
 from .equation_error import CommandReplay, Context, voltage_at_sample
 from .transmission import window_load_states
+from . import zero_phase
 
 
 # -- replay (multiple shooting) ----------------------------------------------------------------------
@@ -94,7 +95,7 @@ def lowpassed_as_recorded(ctx: Context, sim: np.ndarray, idx: np.ndarray, raw: n
     bad = ~np.isfinite(x)
     if bad.any():
         x[bad] = 0.0
-    return sps.sosfiltfilt(ctx.dec.sos, x, axis=0)[pad:pad + L]
+    return zero_phase.sosfiltfilt(ctx.dec.sos, x, axis=0)[pad:pad + L]
 
 
 def window_errors(ctx: Context, param_sets: list[ActuatorParams], starts: list[int], length: float, *,

@@ -135,21 +135,31 @@ def load_csv(path: str | Path, mapping: Mapping | None = None, params=None, *,
     need = max(targets.values()) + 1 if targets else 1
     cols: dict[str, list[str]] = {t: [] for t in targets}
     acols: dict[str, list[str]] = {a: [] for a in aux_cols}
-    lines: list[int] = []
     short: list[int] = []
     long_rows = 0
-    reader = csv.reader([ln for _, ln in data_rows], delimiter=delim)
-    for (lineno, _), row in zip(data_rows, reader):
-        n = len(row)
-        if n < need:
-            short.append(lineno)
+    rows = list(csv.reader([ln for _, ln in data_rows], delimiter=delim))
+    lines = [lineno for lineno, _ in data_rows]
+    if rows and len(set(map(len, rows))) == 1 and len(rows[0]) >= need:
+        # every row as wide as the others and wide enough (the common file): the columns by one transposition
+        n = len(rows[0])
         if n > max(width, need):
-            long_rows += 1
+            long_rows = len(rows)
+        by_column = list(zip(*rows))
         for t, k in targets.items():
-            cols[t].append(row[k] if k < n else "")
+            cols[t] = list(by_column[k])
         for a, (k, _, _) in aux_cols.items():
-            acols[a].append(row[k] if k < n else "")
-        lines.append(lineno)
+            acols[a] = list(by_column[k]) if k < n else [""] * len(rows)
+    else:
+        for lineno, row in zip(lines, rows):
+            n = len(row)
+            if n < need:
+                short.append(lineno)
+            if n > max(width, need):
+                long_rows += 1
+            for t, k in targets.items():
+                cols[t].append(row[k] if k < n else "")
+            for a, (k, _, _) in aux_cols.items():
+                acols[a].append(row[k] if k < n else "")
     values = {}
     for t, k in targets.items():
         name = mapping.columns.get(t, header[k] if k < width else f"#{k}")
