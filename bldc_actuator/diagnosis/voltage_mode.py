@@ -138,6 +138,60 @@ class _Columns:
     ok: np.ndarray
     m: int                 #: samples per fitted interval
     th: np.ndarray | None = None   #: motor-side angle from the position channel (None without one)
+    #: [s] the velocity channel's lag behind the angle's speed (a drive's filtered speed estimate), 0: none measured
+    tau_v: float = 0.0
+    #: the motor's speed with that lag taken out (smoothed): its sign, the replay's start
+    w_true: np.ndarray | None = None
+    #: sign(w_true) lagged like the velocity channel: the friction's direction as the logged speed's equation sees it
+    sgn: np.ndarray | None = None
+
+
+#: a velocity channel's lag is modelled when it exceeds this fraction of a sample ...
+TAU_V_RESOLVED = 0.25
+#: ... and its gain against the angle's speed is 1 within this (else the two do not measure the same speed)
+TAU_V_GAIN_TOLERANCE = 0.1
+#: the band [Hz, at most this fraction of the sample rate] the lag is measured in (the angle's quantization above)
+TAU_V_BAND_HZ = 10.0
+TAU_V_BAND_FRACTION = 0.1
+
+
+def velocity_lag(sig: Signals) -> tuple[float, float] | None:
+    """``(lag [s], gain)`` of the velocity channel ``w`` behind the speed ``ω`` of the angle channel (both logged,
+    motor side): least squares on ``ω ≈ (w + δ w') / g`` of the two low-passed alike (zero phase,
+    :data:`TAU_V_BAND_HZ`), the inverse of a first-order lag, a drive's filtered speed estimate (a low pass at f has
+    δ = 1/(2 pi f)). The noisier angle's speed is the target, the smoother channel and its derivative the columns (the
+    other way round the angle's quantization noise in the columns biased δ low: 7.0 ms for a true 8.5). None
+    without both channels or motion. The main pipeline measures the same lag (``frame.equation_error._lag``) and takes the
+    speed from the angle; here the speed stays the velocity channel's and the equation is lagged alike."""
+    from scipy.signal import butter
+
+    from .frame.zero_phase import sosfiltfilt
+
+    if not (_has(sig, "velocity") and _has(sig, "position")):
+        return None
+    A, B, C = [], [], []
+    for s, e in sig.segments or [(0, len(sig.time))]:
+        if e - s < 60:
+            continue
+        t = sig.time[s:e]
+        dt = float(np.median(np.diff(t)))
+        f = min(TAU_V_BAND_HZ, TAU_V_BAND_FRACTION / dt)
+        sos = butter(2, f * 2.0 * dt, output="sos")
+        w = sosfiltfilt(sos, fill_gaps(sig.channels["velocity"][s:e]))
+        wt = sosfiltfilt(sos, np.gradient(fill_gaps(sig.channels["position"][s:e]), t))
+        edge = min(int(3.0 / (f * dt)), (e - s) // 4)
+        sl = slice(edge, e - s - edge)
+        A.append(wt[sl]), B.append(w[sl]), C.append(np.gradient(w, t)[sl])
+    if not A:
+        return None
+    a, b, d = np.concatenate(A), np.concatenate(B), np.concatenate(C)
+    try:
+        (c0, c1), *_ = np.linalg.lstsq(np.column_stack([b, d]), a, rcond=None)
+    except np.linalg.LinAlgError:
+        return None
+    if not (math.isfinite(c0) and c0 > 0 and math.isfinite(c1)):
+        return None
+    return float(c1 / c0), float(1.0 / c0)
 
 
 def _columns(sig: Signals, tau_e: float) -> tuple[_Columns, bool, str]:
@@ -151,6 +205,23 @@ def _columns(sig: Signals, tau_e: float) -> tuple[_Columns, bool, str]:
     lagged = False
     how = "speed channel" if _has(sig, "velocity") else "speed differentiated from the angle"
     dt_all = float(np.median(np.diff(sig.time))) if n > 1 else 1.0
+    tau_v = 0.0
+    lag = velocity_lag(sig)
+    if lag is not None:
+        d_v, g_v = lag
+        if abs(g_v - 1.0) > TAU_V_GAIN_TOLERANCE:
+            how += (f" (its gain against the angle's speed is {g_v:.3g}: not the same speed, so its lag is not "
+                    f"measured)")
+        elif d_v > TAU_V_RESOLVED * dt_all:
+            tau_v = d_v
+            how += (f", which lags the angle's speed by {1e3 * d_v:.3g} ms (a filtered speed estimate): the "
+                    f"equation's other columns are lagged alike (a first-order lag), the friction's direction "
+                    f"taken from the speed with the lag taken out")
+        else:
+            how += f" (aligned with the angle's speed: lag {1e3 * d_v:.2g} ms)"
+    w_true = np.full(n, np.nan)
+    sgn = np.full(n, np.nan)
+
     m = max(1, int(round(0.02 / max(dt_all, 1e-9))))
     for k, (s, e) in enumerate(sig.segments or [(0, n)]):
         if e - s < 9:
@@ -165,14 +236,33 @@ def _columns(sig: Signals, tau_e: float) -> tuple[_Columns, bool, str]:
             a_ = math.exp(-dt / tau_e)
             vf, wf = _lag(v, a_, tau_e / dt), _lag(w, a_, tau_e / dt)
             lagged = True
-        cols["v"][s:e], cols["w_f"][s:e], cols["w"][s:e] = vf, wf, savgol_filter(w, win, 2)
+        ws = savgol_filter(w, win, 2)
+        wt = ws + tau_v * savgol_filter(w, win, 2, deriv=1, delta=dt) if tau_v > 0 else ws
+        lag_v = (lambda x: _lag(x, math.exp(-dt / tau_v), tau_v / dt)) if tau_v > 0 else (lambda x: x)
+        cols["v"][s:e], cols["w_f"][s:e], cols["w"][s:e] = lag_v(vf), wf, ws
         cols["w_raw"][s:e], cols["v_raw"][s:e] = w, v
+        w_true[s:e], sgn[s:e] = wt, lag_v(np.sign(wt))
         if th is not None:
             th[s:e] = fill_gaps(ch["position"][s:e])
         seg[s:e] = k
     ok = np.all([np.isfinite(c) for c in cols.values()], axis=0) & (seg >= 0)
-    return _Columns(sig.time, cols["v"], cols["w_f"], cols["w"], cols["w_raw"], cols["v_raw"], seg, ok, m, th), \
-        lagged, how
+    c = _Columns(sig.time, cols["v"], cols["w_f"], cols["w"], cols["w_raw"], cols["v_raw"], seg, ok, m, th,
+                 tau_v=tau_v, w_true=w_true, sgn=sgn)
+    return c, lagged, how
+
+
+def _lagged_load_columns(c: _Columns, gear: float) -> tuple[np.ndarray, np.ndarray]:
+    """sin and cos of the output angle θ/N, lagged like the velocity channel per segment."""
+    s_, c_ = np.sin(c.th / gear), np.cos(c.th / gear)
+    if c.tau_v <= 0:
+        return s_, c_
+    out_s, out_c = s_.copy(), c_.copy()
+    for k in np.unique(c.seg[c.seg >= 0]):
+        idx = np.flatnonzero(c.seg == k)
+        dt = float(np.median(np.diff(c.t[idx]))) if len(idx) > 1 else 1.0
+        a = math.exp(-dt / c.tau_v)
+        out_s[idx], out_c[idx] = _lag(s_[idx], a, c.tau_v / dt), _lag(c_[idx], a, c.tau_v / dt)
+    return out_s, out_c
 
 
 def _intervals(c: _Columns, w_eps: float, viscous_share: float = 0.0, gear: float = 1.0):
@@ -194,6 +284,9 @@ def _intervals(c: _Columns, w_eps: float, viscous_share: float = 0.0, gear: floa
     good = c.ok[span].all(axis=1)
     ws = c.w[span]
     good &= (np.abs(ws) > w_eps).all(axis=1) & ((np.sign(ws) == np.sign(ws[:, :1])).all(axis=1))
+    if c.tau_v > 0:   # the true speed keeps its sign too, and the lagged direction has settled after a reversal
+        wt = c.w_true[span]
+        good &= (np.sign(wt) == np.sign(wt[:, :1])).all(axis=1) & (np.abs(c.sgn[span]) > 0.95).all(axis=1)
     starts, span = starts[good], span[good]
     T = c.t[span[:, -1]] - c.t[span[:, 0]]
 
@@ -203,11 +296,12 @@ def _intervals(c: _Columns, w_eps: float, viscous_share: float = 0.0, gear: floa
 
     y = (c.w_raw[span[:, -1]] - c.w_raw[span[:, 0]]) / T
     w_mix = (1.0 - viscous_share) * mean(c.w_f) + viscous_share * mean(c.w_raw)
-    cols = {"k_over_r": mean(c.v), "damping": -w_mix, "coulomb": -np.sign(c.w[span[:, m // 2]]),
-            "offset": -np.ones(len(starts))}
+    sign = -np.sign(c.w[span[:, m // 2]]) if c.tau_v <= 0 else -mean(c.sgn)
+    cols = {"k_over_r": mean(c.v), "damping": -w_mix, "coulomb": sign, "offset": -np.ones(len(starts))}
     if c.th is not None:
-        cols["load_sin"] = -mean(np.sin(c.th / gear)) / gear
-        cols["load_cos"] = -mean(np.cos(c.th / gear)) / gear
+        l_sin, l_cos = _lagged_load_columns(c, gear)
+        cols["load_sin"] = -mean(l_sin) / gear
+        cols["load_cos"] = -mean(l_cos) / gear
     return starts, y, cols, mean
 
 
@@ -310,11 +404,28 @@ def _replay(c: _Columns, wins: list[np.ndarray], J: float, coef: dict, rest=None
             tho = th / gear
             out = coef.get("load_sin", 0.0) * np.sin(tho) + coef.get("load_cos", 0.0) * np.cos(tho)
             return (out + (rest(tho) if rest is not None else 0.0)) / gear
+    w0 = c.w[W[:, 0]] if c.tau_v <= 0 else c.w_true[W[:, 0]]
     sim = simulate_speed(J, coef["k_over_r"], coef["damping"], max(0.0, coef["coulomb"]), coef["offset"],
-                         c.v_raw[W], np.diff(c.t[W], axis=1), c.w[W[:, 0]],
+                         c.v_raw[W], np.diff(c.t[W], axis=1), w0,
                          theta0=c.th[W[:, 0]] if c.th is not None else None, load=load,
                          gear_mu=max(0.0, coef.get("gear", 0.0)), back_emf=back_emf)
+    if c.tau_v > 0:   # as the velocity channel sees it: the first-order lag, started at the logged speed
+        sim = _lag_from(sim, c.w[W[:, 0]], np.diff(c.t[W], axis=1), c.tau_v)
     return np.sqrt(np.mean((sim - c.w_raw[W]) ** 2, axis=1))
+
+
+def _lag_from(x: np.ndarray, y0: np.ndarray, dt: np.ndarray, tau: float) -> np.ndarray:
+    """The first-order lag 1/(1 + τ s) of each row of ``x`` (linear between samples, intervals ``dt``), its output
+    started at ``y0``."""
+    y = np.empty_like(x)
+    y[:, 0] = y0
+    for j in range(1, x.shape[1]):
+        a = np.exp(-dt[:, j - 1] / tau)
+        r = tau / dt[:, j - 1]
+        b0 = 1.0 - r * (1.0 - a)
+        b1 = r * (1.0 - a) - a
+        y[:, j] = a * y[:, j - 1] + b0 * x[:, j] + b1 * x[:, j - 1]
+    return y
 
 
 # --------------------------------------------------------------------------------------------- diagnosis
