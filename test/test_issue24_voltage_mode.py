@@ -68,6 +68,21 @@ def _log(tmp_path, b, tc, *, duration=40.0, noise=0.004, seed=3):
     return p
 
 
+def _servo_csv(path, rhs, x0, *, speed_state: int, seed: int, duration: float = 40.0):
+    """The servo's CSV from the ODE ``rhs`` (state 0 the motor angle, ``speed_state`` the logged speed): t,
+    angle_out, speed_out, duty, v_bus with the log's noise."""
+    t = np.arange(int(duration * RATE)) / RATE
+    sol = solve_ivp(rhs, (0.0, t[-1]), x0, method="LSODA", t_eval=t, rtol=1e-8, atol=1e-8, max_step=1e-3)
+    assert sol.success
+    rng = np.random.default_rng(seed)
+    cols = {"t": t, "angle_out": sol.y[0] / GEAR + 1e-4 * rng.standard_normal(len(t)),
+            "speed_out": sol.y[speed_state] / GEAR + 0.004 * rng.standard_normal(len(t)), "duty": _duty(t),
+            "v_bus": _vbus(t)}
+    path.write_text(",".join(cols) + "\n" + "\n".join(",".join(f"{v:.10g}" for v in r)
+                                                       for r in np.column_stack(list(cols.values()))) + "\n")
+    return path
+
+
 def _signals(path, params):
     return clean(loaders.load(path, mapping=Mapping.parse(MAP), params=params), params=params)
 
@@ -188,15 +203,7 @@ def test_a_pendulum_on_the_output_is_told_from_friction(tmp_path):
         load = tau_g * np.sin(th / GEAR + phase) / GEAR
         return [w, (K / R * (v - K * w) - B_TRUE * w - TC_TRUE * np.tanh(w / w_s) - load) / J]
 
-    t = np.arange(int(40.0 * RATE)) / RATE
-    sol = solve_ivp(rhs, (0.0, t[-1]), [0.0, 0.0], method="LSODA", t_eval=t, rtol=1e-8, atol=1e-8, max_step=1e-3)
-    assert sol.success
-    rng = np.random.default_rng(7)
-    cols = {"t": t, "angle_out": sol.y[0] / GEAR + 1e-4 * rng.standard_normal(len(t)),
-            "speed_out": sol.y[1] / GEAR + 0.004 * rng.standard_normal(len(t)), "duty": _duty(t), "v_bus": _vbus(t)}
-    path = tmp_path / "pendulum.csv"
-    path.write_text(",".join(cols) + "\n" + "\n".join(",".join(f"{v:.10g}" for v in r)
-                                                       for r in np.column_stack(list(cols.values()))) + "\n")
+    path = _servo_csv(tmp_path / "pendulum.csv", rhs, [0.0, 0.0], speed_state=1, seed=7)
     p = _nominal()
     res = vm.diagnose(_signals(path, p), p)
     named = {f.effect: f for f in res.findings}
@@ -298,16 +305,7 @@ def test_a_filtered_speed_estimate_is_measured_against_the_angle_and_the_equatio
         v = _duty(t) * _vbus(t)
         return [w, (K / R * (v - K * w) - B_TRUE * w - TC_TRUE * np.tanh(w / w_s)) / J, (w - w_est) / tau]
 
-    t = np.arange(int(40.0 * RATE)) / RATE
-    sol = solve_ivp(rhs, (0.0, t[-1]), [0.0, 0.0, 0.0], method="LSODA", t_eval=t, rtol=1e-8, atol=1e-8,
-                    max_step=1e-3)
-    assert sol.success
-    rng = np.random.default_rng(13)
-    cols = {"t": t, "angle_out": sol.y[0] / GEAR + 1e-4 * rng.standard_normal(len(t)),
-            "speed_out": sol.y[2] / GEAR + 0.004 * rng.standard_normal(len(t)), "duty": _duty(t), "v_bus": _vbus(t)}
-    path = tmp_path / "lagged.csv"
-    path.write_text(",".join(cols) + "\n" + "\n".join(",".join(f"{v:.10g}" for v in r)
-                                                       for r in np.column_stack(list(cols.values()))) + "\n")
+    path = _servo_csv(tmp_path / "lagged.csv", rhs, [0.0, 0.0, 0.0], speed_state=2, seed=13)
     p = _nominal()
     sig = _signals(path, p)
     lag, gain = vm.velocity_lag(sig)

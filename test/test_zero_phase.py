@@ -1,4 +1,4 @@
-"""The diagnosis' zero-phase filter (diagnosis/frame/zero_phase.py) is scipy's sosfiltfilt with each filter's
+"""The zero-phase filter (bldc_actuator/zero_phase.py) is scipy's sosfiltfilt with each filter's
 initial state made once: the same numbers on any axis and shape, and scipy's own error for a record too short."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import scipy.signal as sps
 
-from bldc_actuator.diagnosis.frame.zero_phase import sosfiltfilt
+from bldc_actuator.zero_phase import sosfiltfilt
 
 
 @pytest.mark.parametrize("order,fc", [(4, 0.2), (2, 0.05), (4, 0.9)])

@@ -165,7 +165,7 @@ def velocity_lag(sig: Signals) -> tuple[float, float] | None:
     speed from the angle; here the speed stays the velocity channel's and the equation is lagged alike."""
     from scipy.signal import butter
 
-    from .frame.zero_phase import sosfiltfilt
+    from ..zero_phase import sosfiltfilt
 
     if not (_has(sig, "velocity") and _has(sig, "position")):
         return None

@@ -254,7 +254,7 @@ def _compliance_rss(ctx, loc=None):
     ``rss`` the residual left by the compensated fit."""
     from scipy.signal import butter, lfilter, lfilter_zi
 
-    from ..frame.zero_phase import sosfiltfilt
+    from ...zero_phase import sosfiltfilt
 
     compensated_solve, filter_cross_of_load = ctx.tools.compensated_solve, ctx.tools.filter_cross_of_load
 

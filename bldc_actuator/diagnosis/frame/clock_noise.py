@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import signal as sps
 
-from . import zero_phase
+from ... import zero_phase
 
 
 def _impulse_energy(ctx, derivatives: int) -> np.ndarray:

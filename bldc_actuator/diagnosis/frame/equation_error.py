@@ -32,7 +32,7 @@ from ... import effects, frames
 from ... import drive_tuning
 from ... import voltage_timing as vt
 from ...params import ActuatorParams
-from . import zero_phase
+from ... import zero_phase
 
 EQUATIONS = ("mechanical", "electrical")
 UNITS = {"mechanical": "A (q current; torque / K)", "electrical": "V (q-axis)"}

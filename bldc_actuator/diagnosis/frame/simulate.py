@@ -28,7 +28,7 @@ from ...model import BatchActuator
 from ...params import ActuatorParams, controller_motor, keep_controller_of
 from .equation_error import CommandReplay, Context, voltage_at_sample
 from .transmission import window_load_states
-from . import zero_phase
+from ... import zero_phase
 
 
 # -- replay (multiple shooting) ----------------------------------------------------------------------

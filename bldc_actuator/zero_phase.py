@@ -1,4 +1,5 @@
-"""Zero-phase filtering of second-order sections with each filter's steady initial state made once.
+"""Zero-phase filtering of second-order sections with each filter's steady initial state made once (a signal
+tool below the diagnosis: its frame and its effect modules use it).
 
 The algorithm is :func:`scipy.signal.sosfiltfilt`'s with its defaults (odd extension over three times the
 filter's taps, the sections started in the steady state of the first sample, forward then backward), so the
