@@ -108,7 +108,9 @@ def window_errors(ctx: Context, param_sets: list[ActuatorParams], starts: list[i
     nW = len(starts)
     have_d = current_d and "current_d" in ctx.have
     meas_d = ctx.dec.lowpass(ctx.sig["i_d"])[r["idx"][:, :nW]] if have_d else None
-    sim_i = lowpassed_as_recorded(ctx, r["sim_i"], r["idx"], ctx.sig["i_q"]) if current_lowpassed else r["sim_i"]
+    # (already low-passed as logged where a set has a dead time, :func:`as_logged`: not twice)
+    sim_i = (lowpassed_as_recorded(ctx, r["sim_i"], r["idx"], ctx.sig["i_q"])
+             if current_lowpassed and not r.get("sim_lowpassed") else r["sim_i"])
     out = []
     for j in range(len(param_sets)):
         sl = slice(j * nW, (j + 1) * nW)
@@ -202,7 +204,8 @@ def simulate_windows(ctx: Context, param_sets: list[ActuatorParams], starts: lis
         for k, v in part.items():
             sims[k][:, cols] = v
     idx = st[None, :] + np.arange(1, L + 1)[:, None]
-    if any(p.drive.dead_time > 0.0 for p in plist):   # the kernel's source of a ripple above the log's cut-off
+    lowpassed = any(p.drive.dead_time > 0.0 for p in plist)   # the kernel's source of a ripple above the cut-off
+    if lowpassed:
         as_logged(ctx, sims, w_start[st], S["omega_s"][idx])
     # the q voltage that acts on the winding (turned back by the recording's voltage frame delay, as the voltage
     # equation uses it): the drive's simulated voltage is in the rotor frame of the instant it acts; where that delay
@@ -212,7 +215,7 @@ def simulate_windows(ctx: Context, param_sets: list[ActuatorParams], starts: lis
     if "v_q" in S:
         meas_v = src.v_meas[idx]
     return {**sims, "meas_i": i_meas[idx], "meas_w": S["omega_s"][idx], "meas_th": S["theta"][idx],
-            "meas_v": meas_v, "idx": idx}
+            "meas_v": meas_v, "idx": idx, "sim_lowpassed": lowpassed and not (ctx.dec.steady or ctx.dec.sos is None)}
 
 
 
