@@ -113,6 +113,11 @@ class VoltageModeResult:
 
 # --------------------------------------------------------------------------------------------- signals
 
+def _lag_coefficients(a, tau_over_dt):
+    """``(b0, b1)`` of the first-order lag for an input linear between samples (:func:`_lag`)."""
+    return 1.0 - tau_over_dt * (1.0 - a), tau_over_dt * (1.0 - a) - a
+
+
 def _lag(x: np.ndarray, a: float, tau_over_dt: float) -> np.ndarray:
     """The first-order lag 1/(1 + τ s) of ``x`` linear between samples (exact for that input), started at x_0:
     y_k = a y_(k-1) + b0 x_k + b1 x_(k-1), a = exp(-dt/τ)."""
@@ -120,8 +125,7 @@ def _lag(x: np.ndarray, a: float, tau_over_dt: float) -> np.ndarray:
 
     if not len(x):
         return x
-    b0 = 1.0 - tau_over_dt * (1.0 - a)
-    b1 = tau_over_dt * (1.0 - a) - a
+    b0, b1 = _lag_coefficients(a, tau_over_dt)
     zi = np.array([(1.0 - b0) * x[0]])          # the steady state at x_0
     return lfilter([b0, b1], [1.0, -a], x, zi=zi)[0]
 
@@ -144,6 +148,9 @@ class _Columns:
     w_true: np.ndarray | None = None
     #: sign(w_true) lagged like the velocity channel: the friction's direction as the logged speed's equation sees it
     sgn: np.ndarray | None = None
+    #: sin and cos of the output angle θ/N, lagged like the velocity channel (a gravity-like load's columns)
+    th_sin: np.ndarray | None = None
+    th_cos: np.ndarray | None = None
 
 
 #: a velocity channel's lag is modelled when it exceeds this fraction of a sample ...
@@ -194,7 +201,7 @@ def velocity_lag(sig: Signals) -> tuple[float, float] | None:
     return float(c1 / c0), float(1.0 / c0)
 
 
-def _columns(sig: Signals, tau_e: float) -> tuple[_Columns, bool, str]:
+def _columns(sig: Signals, tau_e: float, gear: float = 1.0) -> tuple[_Columns, bool, str]:
     from scipy.signal import savgol_filter
 
     ch = sig.channels
@@ -221,6 +228,8 @@ def _columns(sig: Signals, tau_e: float) -> tuple[_Columns, bool, str]:
             how += f" (aligned with the angle's speed: lag {1e3 * d_v:.2g} ms)"
     w_true = np.full(n, np.nan)
     sgn = np.full(n, np.nan)
+    th_sin = np.full(n, np.nan) if th is not None else None
+    th_cos = np.full(n, np.nan) if th is not None else None
 
     m = max(1, int(round(0.02 / max(dt_all, 1e-9))))
     for k, (s, e) in enumerate(sig.segments or [(0, n)]):
@@ -244,25 +253,12 @@ def _columns(sig: Signals, tau_e: float) -> tuple[_Columns, bool, str]:
         w_true[s:e], sgn[s:e] = wt, lag_v(np.sign(wt))
         if th is not None:
             th[s:e] = fill_gaps(ch["position"][s:e])
+            th_sin[s:e], th_cos[s:e] = lag_v(np.sin(th[s:e] / gear)), lag_v(np.cos(th[s:e] / gear))
         seg[s:e] = k
     ok = np.all([np.isfinite(c) for c in cols.values()], axis=0) & (seg >= 0)
     c = _Columns(sig.time, cols["v"], cols["w_f"], cols["w"], cols["w_raw"], cols["v_raw"], seg, ok, m, th,
-                 tau_v=tau_v, w_true=w_true, sgn=sgn)
+                 tau_v=tau_v, w_true=w_true, sgn=sgn, th_sin=th_sin, th_cos=th_cos)
     return c, lagged, how
-
-
-def _lagged_load_columns(c: _Columns, gear: float) -> tuple[np.ndarray, np.ndarray]:
-    """sin and cos of the output angle θ/N, lagged like the velocity channel per segment."""
-    s_, c_ = np.sin(c.th / gear), np.cos(c.th / gear)
-    if c.tau_v <= 0:
-        return s_, c_
-    out_s, out_c = s_.copy(), c_.copy()
-    for k in np.unique(c.seg[c.seg >= 0]):
-        idx = np.flatnonzero(c.seg == k)
-        dt = float(np.median(np.diff(c.t[idx]))) if len(idx) > 1 else 1.0
-        a = math.exp(-dt / c.tau_v)
-        out_s[idx], out_c[idx] = _lag(s_[idx], a, c.tau_v / dt), _lag(c_[idx], a, c.tau_v / dt)
-    return out_s, out_c
 
 
 def _intervals(c: _Columns, w_eps: float, viscous_share: float = 0.0, gear: float = 1.0):
@@ -299,9 +295,8 @@ def _intervals(c: _Columns, w_eps: float, viscous_share: float = 0.0, gear: floa
     sign = -np.sign(c.w[span[:, m // 2]]) if c.tau_v <= 0 else -mean(c.sgn)
     cols = {"k_over_r": mean(c.v), "damping": -w_mix, "coulomb": sign, "offset": -np.ones(len(starts))}
     if c.th is not None:
-        l_sin, l_cos = _lagged_load_columns(c, gear)
-        cols["load_sin"] = -mean(l_sin) / gear
-        cols["load_cos"] = -mean(l_cos) / gear
+        cols["load_sin"] = -mean(c.th_sin) / gear
+        cols["load_cos"] = -mean(c.th_cos) / gear
     return starts, y, cols, mean
 
 
@@ -404,9 +399,9 @@ def _replay(c: _Columns, wins: list[np.ndarray], J: float, coef: dict, rest=None
             tho = th / gear
             out = coef.get("load_sin", 0.0) * np.sin(tho) + coef.get("load_cos", 0.0) * np.cos(tho)
             return (out + (rest(tho) if rest is not None else 0.0)) / gear
-    w0 = c.w[W[:, 0]] if c.tau_v <= 0 else c.w_true[W[:, 0]]
+    # started from the speed with the velocity channel's lag taken out (the smoothed speed where it has none)
     sim = simulate_speed(J, coef["k_over_r"], coef["damping"], max(0.0, coef["coulomb"]), coef["offset"],
-                         c.v_raw[W], np.diff(c.t[W], axis=1), w0,
+                         c.v_raw[W], np.diff(c.t[W], axis=1), c.w_true[W[:, 0]],
                          theta0=c.th[W[:, 0]] if c.th is not None else None, load=load,
                          gear_mu=max(0.0, coef.get("gear", 0.0)), back_emf=back_emf)
     if c.tau_v > 0:   # as the velocity channel sees it: the first-order lag, started at the logged speed
@@ -421,9 +416,7 @@ def _lag_from(x: np.ndarray, y0: np.ndarray, dt: np.ndarray, tau: float) -> np.n
     y[:, 0] = y0
     for j in range(1, x.shape[1]):
         a = np.exp(-dt[:, j - 1] / tau)
-        r = tau / dt[:, j - 1]
-        b0 = 1.0 - r * (1.0 - a)
-        b1 = r * (1.0 - a) - a
+        b0, b1 = _lag_coefficients(a, tau / dt[:, j - 1])
         y[:, j] = a * y[:, j - 1] + b0 * x[:, j] + b1 * x[:, j - 1]
     return y
 
@@ -493,7 +486,7 @@ def diagnose(sig: Signals, params, *, holdout: float = 0.3, tolerance: float = 0
     n_train = None
     if holdout_signals is not None and len(holdout_signals.time):
         sig, n_train = _join(sig, holdout_signals)
-    c, lagged, how = _columns(sig, tau_e)
+    c, lagged, how = _columns(sig, tau_e, N)
     notes = [f"no current sensor: the mechanical equation closed by the voltage, i = (v - K ω)/R"
              + (f" lagged by L/R = {1e3 * tau_e:.3g} ms (resolved by the sampling)" if lagged else
                 f" (L/R = {1e3 * tau_e:.3g} ms is below {TAU_E_RESOLVED:g} sample: not resolved, static form)")
